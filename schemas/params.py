@@ -1,0 +1,75 @@
+"""Algorithm parameters, with the paper's defaults.
+
+These are plain pydantic models (not settings): they travel inside jobs and can be
+overridden per run. Deployment settings live in :mod:`schemas.settings`.
+"""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field
+
+__all__ = [
+    "LayoutParams",
+    "ManhattanParams",
+    "ParserLimits",
+    "PipelineParams",
+    "PlacementParams",
+]
+
+
+class _Frozen(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class ParserLimits(_Frozen):
+    """Bounds on what a fragment file may contain."""
+
+    min_points: int = Field(1000, ge=1, description="fewest finite points a usable fragment has")
+    max_points: int = Field(5_000_000, ge=1, description="most points a fragment may declare")
+
+
+class ManhattanParams(_Frozen):
+    """Plane extraction and Manhattan-frame estimation (paper 3.1, preprocessing)."""
+
+    voxel_size: float = Field(0.05, gt=0, description="thinning before plane search, m")
+    ransac_distance: float = Field(0.03, gt=0, description="plane inlier distance, m")
+    ransac_iterations: int = Field(300, ge=10)
+    max_planes: int = Field(12, ge=1)
+    min_plane_fraction: float = Field(0.01, gt=0, lt=1, description="smallest plane kept")
+    max_tilt_deg: float = Field(30.0, gt=0, lt=90, description="largest accepted tilt of up")
+
+
+class LayoutParams(_Frozen):
+    """Local layout estimation on the projection grid (paper 3.1)."""
+
+    cell_size: float = Field(0.08, gt=0, description="grid cell size s, m")
+    min_cell_points: int = Field(
+        20,
+        ge=1,
+        description="N: a cell is high wall-evidence when its column holds at least N points "
+        "after thinning to one point per s-sized voxel (N*s of wall height)",
+    )
+    complexity_penalty: float = Field(0.1, ge=0, description="lambda in the edge weight")
+    boundary_band: float = Field(0.10, gt=0, description="half-width of the boundary band, m")
+    min_wall_cells: int = Field(3, ge=1, description="shortest candidate wall segment, cells")
+
+
+class PlacementParams(_Frozen):
+    """Global placement energy and search (paper 3.2)."""
+
+    use_complexity: bool = True
+    use_closure: bool = True
+    use_boundary: bool = True
+    boundary_sigma: float = Field(0.05, gt=0, description="sigma of the mismatch CDF, m")
+    min_boundary_points: int = Field(50, ge=1)
+    closure_tolerance: float = Field(0.5, gt=0, description="largest closure gap, m")
+    top_k: int = Field(5, ge=1, description="runner-up placements kept for diagnostics")
+
+
+class PipelineParams(_Frozen):
+    """Every algorithm parameter, grouped by stage."""
+
+    parser: ParserLimits = ParserLimits()
+    manhattan: ManhattanParams = ManhattanParams()
+    layout: LayoutParams = LayoutParams()
+    placement: PlacementParams = PlacementParams()

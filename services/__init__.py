@@ -1,0 +1,1 @@
+"""The Floorplan-Jigsaw algorithm: pure functions over numpy arrays, no I/O."""

@@ -1,0 +1,88 @@
+"""Local layout of one fragment: the chain of walls it sees (paper 3.1), entry function."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from schemas.params import PipelineParams
+from services.manhattan import estimate_manhattan_frame, thin_with_normals
+from services.types import FloatArray, LocalLayout
+from services.wall_graph import find_wall_chain
+from services.wall_lines import find_wall_lines
+
+__all__ = ["boundary_points", "estimate_local_layout"]
+
+ProgressFn = Callable[[str, float], None]
+_MAX_BOUNDARY_POINTS = 2000
+
+
+def boundary_points(
+    aligned: FloatArray, end: FloatArray, wall_direction: FloatArray, band: float
+) -> FloatArray:
+    """Points within ``band`` of the vertical cutting plane through a chain end.
+
+    The plane is perpendicular to the end wall. At most 2000 points are kept, evenly
+    strided, so every fragment contributes alike to the boundary similarity.
+
+    Parameters
+    ----------
+    aligned : (M, 3) float64, fragment points, aligned frame.
+    end : (2,) the source or target keypoint.
+    wall_direction : (2,) unit direction of the wall that ends there.
+    band : half-width of the band, meters.
+    """
+    distance = (aligned[:, :2] - end) @ wall_direction
+    near = aligned[np.abs(distance) < band]
+    stride = max(1, int(np.ceil(len(near) / _MAX_BOUNDARY_POINTS)))
+    return near[::stride].copy()
+
+
+def _unit(v: FloatArray) -> FloatArray:
+    norm = float(np.linalg.norm(v))
+    return v / norm if norm > 0 else v
+
+
+def estimate_local_layout(
+    points: FloatArray,
+    params: PipelineParams = PipelineParams(),
+    progress: ProgressFn | None = None,
+) -> LocalLayout:
+    """Estimate the wall chain a fragment sees.
+
+    Parameters
+    ----------
+    points : (N, 3) float64, fragment-local frame, meters, finite.
+    params : all algorithm parameters (Manhattan and layout sections are used).
+    progress : optional callback ``(stage, fraction)``.
+
+    Returns
+    -------
+    LocalLayout
+        Keypoints in the aligned frame (empty when no wall was found), the Manhattan frame
+        and the boundary points at both chain ends.
+    """
+    report = progress or (lambda stage, fraction: None)
+    report("manhattan", 0.0)
+    cloud = thin_with_normals(points, params.manhattan)
+    frame = estimate_manhattan_frame(cloud, params.manhattan)
+    aligned = cloud.points @ frame.rotation.T
+    normals = cloud.normals @ frame.rotation.T
+    report("walls", 0.4)
+    lines = find_wall_lines(aligned, normals, frame.floor_z, frame.ceiling_z, params.layout)
+    report("chain", 0.7)
+    chain = find_wall_chain(lines, params.layout)
+    if chain is None or len(chain.keypoints) < 2:
+        report("done", 1.0)
+        return LocalLayout(keypoints=np.zeros((0, 2)), frame=frame)
+    kp = chain.keypoints
+    band = params.layout.boundary_band
+    layout = LocalLayout(
+        keypoints=kp,
+        frame=frame,
+        source_boundary=boundary_points(aligned, kp[0], _unit(kp[1] - kp[0]), band),
+        target_boundary=boundary_points(aligned, kp[-1], _unit(kp[-1] - kp[-2]), band),
+    )
+    report("done", 1.0)
+    return layout

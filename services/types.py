@@ -1,0 +1,78 @@
+"""Typed, frozen records passed between pipeline stages.
+
+Frames: *local* is the fragment file's own frame; *aligned* is the fragment's Manhattan
+frame (z up, walls along x or y, same origin as local); *site* is the common output frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "FloatArray",
+    "LocalLayout",
+    "ManhattanFrame",
+    "ParsedFragment",
+]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ParsedFragment:
+    """A decoded fragment file.
+
+    points: (N, 3) float64, fragment-local, meters, all finite.
+    """
+
+    points: FloatArray
+    format: str
+    dropped_nonfinite: int = 0
+
+
+@dataclass(frozen=True)
+class ManhattanFrame:
+    """The rotation that aligns a fragment to its Manhattan axes.
+
+    rotation: (3, 3) float64; ``aligned = rotation @ local``. Row 2 is the up axis in the
+    local frame; rows 0 and 1 are the two wall directions.
+    floor_z, ceiling_z: heights in the aligned frame (ceiling None when never seen).
+    """
+
+    rotation: FloatArray
+    floor_z: float
+    ceiling_z: float | None
+    n_planes: int = 0
+    wall_support: float = 0.0
+
+
+@dataclass(frozen=True)
+class LocalLayout:
+    """The chain of walls one fragment sees (paper 3.1).
+
+    keypoints: (K, 2) float64, aligned frame (x, y), meters, ordered source -> target so the
+    room interior lies on the LEFT of every wall (counter-clockwise room loop). K == 0 when no
+    wall chain was found.
+    frame: the fragment's Manhattan frame.
+    source_boundary, target_boundary: (M, 3) float64, aligned frame: points within the
+    boundary band of the cutting planes through the source and target.
+    """
+
+    keypoints: FloatArray
+    frame: ManhattanFrame
+    source_boundary: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    target_boundary: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+
+    @property
+    def ok(self) -> bool:
+        """True when at least one wall was found."""
+        return len(self.keypoints) >= 2
+
+    def keypoints_local(self) -> FloatArray:
+        """(K, 3) keypoints in the fragment-local frame, at floor height."""
+        k = len(self.keypoints)
+        aligned = np.column_stack([self.keypoints, np.full(k, self.frame.floor_z)])
+        return aligned @ self.frame.rotation  # rotation is orthonormal: R^T applied row-wise

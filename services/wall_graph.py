@@ -1,0 +1,253 @@
+"""Wall estimation graph, source/target choice and the minimum-cost wall chain (paper 3.1).
+
+Nodes are candidate keypoints: ends of candidate wall segments, corners deduced where two
+perpendicular walls would meet, and the ends of deduced walls across occluded stretches
+between misaligned parallel walls. Edges join nodes on a common wall line, directed so the
+interior stays on the left, with the paper's weight ``(L - H) / H + lambda``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components, dijkstra, minimum_spanning_tree
+
+from schemas.params import LayoutParams
+from services.types import FloatArray
+from services.wall_lines import WallLine
+
+__all__ = ["WallChain", "find_wall_chain"]
+
+_CORNER_REACH = 2.0  # m, how far past a segment's end a deduced corner may lie
+_OCCLUSION_REACH = 3.0  # m, longest occluded stretch bridged between parallel walls
+_SNAP_CELLS = 2.0  # a segment end this close to a deduced corner is merged into it
+
+
+@dataclass(frozen=True)
+class WallChain:
+    """The estimated wall chain of a fragment, aligned frame.
+
+    keypoints: (K, 2) float64, source to target, interior on the left.
+    cost: total edge weight of the chain.
+    """
+
+    keypoints: FloatArray
+    cost: float
+
+
+@dataclass
+class _Nodes:
+    """Candidate keypoints and, per line, the run coordinates of the nodes on it."""
+
+    points: list[FloatArray]
+    on_line: dict[int, dict[int, float]]  # line index -> {node index: run coordinate}
+    _index: dict[tuple[int, int], int]
+
+    def lines_of(self, node: int) -> list[int]:
+        return [li for li, members in self.on_line.items() if node in members]
+
+    def add(self, point: FloatArray, memberships: list[tuple[int, float]]) -> None:
+        key = (round(float(point[0]) * 100), round(float(point[1]) * 100))
+        node = self._index.get(key)
+        if node is None:
+            node = len(self.points)
+            self._index[key] = node
+            self.points.append(point)
+        for line, run in memberships:
+            self.on_line.setdefault(line, {})[node] = run
+
+
+def _span_gap(span: FloatArray, run: float) -> float:
+    """Distance from a run coordinate to a segment span (0 inside it)."""
+    return float(max(span[0] - run, run - span[1], 0.0))
+
+
+def _add_corners(lines: list[WallLine], nodes: _Nodes) -> None:
+    for i, a in enumerate(lines):
+        for j, b in enumerate(lines):
+            if a.axis != 0 or b.axis != 1:
+                continue
+            # a runs along x at y = a.offset; b runs along y at x = b.offset.
+            near_a = min(_span_gap(seg, b.offset) for seg in a.segments)
+            near_b = min(_span_gap(seg, a.offset) for seg in b.segments)
+            if near_a <= _CORNER_REACH and near_b <= _CORNER_REACH:
+                corner = np.array([b.offset, a.offset])
+                nodes.add(corner, [(i, b.offset), (j, a.offset)])
+
+
+def _occluded_links(lines: list[WallLine], cell: float) -> list[WallLine]:
+    """Deduced walls joining misaligned parallel segments that face the same interior."""
+    deduced: list[WallLine] = []
+    for a in lines:
+        for b in lines:
+            if a is b or a.axis != b.axis or a.travel != b.travel or a.virtual or b.virtual:
+                continue
+            if abs(a.offset - b.offset) < 2 * cell:
+                continue
+            for end in a.segments[:, 1] if a.travel > 0 else a.segments[:, 0]:
+                for start in b.segments[:, 0] if a.travel > 0 else b.segments[:, 1]:
+                    ahead = (start - end) * a.travel
+                    if -2 * cell <= ahead <= _OCCLUSION_REACH:
+                        deduced.extend(_bridge(a, b, run) for run in (end, start))
+    return deduced
+
+
+def _bridge(a: WallLine, b: WallLine, run: float) -> WallLine:
+    """A fully evidenced wall at run coordinate ``run`` from line ``a`` over to line ``b``."""
+    lo, hi = sorted((a.offset, b.offset))
+    cells = max(1, round((hi - lo) / a.cell_size))
+    # The chain walks along a, then across to b: the bridge is travelled from a to b.
+    travel = 1 if b.offset > a.offset else -1
+    return WallLine(
+        axis=1 - a.axis,
+        offset=float(run),
+        travel=travel,
+        origin=lo,
+        cell_size=(hi - lo) / cells,
+        high=np.ones(cells, dtype=bool),
+        segments=np.array([[lo, hi]]),
+        virtual=True,
+    )
+
+
+def _build_nodes(lines: list[WallLine]) -> _Nodes:
+    nodes = _Nodes(points=[], on_line={}, _index={})
+    _add_corners(lines, nodes)
+    for i, line in enumerate(lines):
+        taken = np.fromiter(nodes.on_line.get(i, {}).values(), float)
+        for run in line.segments.ravel():
+            # A segment end next to a deduced corner is that corner, blurred by noise.
+            if not np.any(np.abs(taken - run) < _SNAP_CELLS * line.cell_size):
+                nodes.add(line.point(float(run)), [(i, float(run))])
+    for i, line in enumerate(lines):
+        if not line.virtual:
+            continue
+        for j, other in enumerate(lines):
+            if other.axis != line.axis and not other.virtual:
+                lo, hi = line.segments[0]
+                if lo - 1e-6 <= other.offset <= hi + 1e-6:
+                    nodes.add(other.point(line.offset), [(i, other.offset), (j, line.offset)])
+    return nodes
+
+
+def _edges(lines: list[WallLine], nodes: _Nodes, penalty: float) -> tuple[csr_matrix, csr_matrix]:
+    """Directed WE-graph weights and undirected ST-graph lengths.
+
+    The ST-graph joins only neighbouring nodes along a line (across gaps up to the
+    occlusion reach), so its spanning forest follows the walls instead of jumping back.
+    """
+    n = len(nodes.points)
+    we: dict[tuple[int, int], float] = {}
+    st: dict[tuple[int, int], float] = {}
+    for li, members in nodes.on_line.items():
+        line = lines[li]
+        ordered = sorted(members.items(), key=lambda kv: kv[1] * line.travel)
+        for a in range(len(ordered)):
+            for b in range(a + 1, len(ordered)):
+                (u, ru), (v, rv) = ordered[a], ordered[b]
+                length, high = line.evidence(ru, rv)
+                corner = len(nodes.lines_of(u)) > 1 or len(nodes.lines_of(v)) > 1
+                if b == a + 1 and _st_link(line, (ru, rv), length, high, corner):
+                    st[(min(u, v), max(u, v))] = max(length * line.cell_size, 1e-6)
+                if high == 0 or length <= 0:
+                    continue
+                # Cells are counted whole, so H may exceed the fractional L by a rounding.
+                weight = max(length - high, 0.0) / high + penalty
+                we[(u, v)] = min(weight, we.get((u, v), np.inf))
+    return _sparse(we, n), _sparse(st, n)
+
+
+def _st_link(
+    line: WallLine, runs: tuple[float, float], length: float, high: int, corner: bool
+) -> bool:
+    """Neighbours on a line are linked when mostly evidenced, across an inner gap, or
+    across a short occluded stretch that ends at a deduced corner."""
+    if high >= 0.5 * length:
+        return True
+    if length * line.cell_size > _OCCLUSION_REACH:
+        return False
+    if corner and length * line.cell_size <= _CORNER_REACH:
+        return True
+    lo, hi = sorted(runs)
+    start, end = line.origin, line.origin + len(line.high) * line.cell_size
+    return line.evidence(start, lo)[1] > 0 and line.evidence(hi, end)[1] > 0
+
+
+def _sparse(weights: dict[tuple[int, int], float], n: int) -> csr_matrix:
+    if not weights:
+        return csr_matrix((n, n))
+    rows, cols = np.array(list(weights)).T
+    return csr_matrix((np.fromiter(weights.values(), float), (rows, cols)), shape=(n, n))
+
+
+def _tree_ends(st: csr_matrix) -> tuple[int, int] | None:
+    """Ends of the longest path in the minimal spanning forest of the ST-graph."""
+    forest = minimum_spanning_tree(st)
+    forest = forest + forest.T
+    n_comp, labels = connected_components(forest, directed=False)
+    best: tuple[float, int, int] | None = None
+    for comp in range(n_comp):
+        members = np.flatnonzero(labels == comp)
+        if len(members) < 2:
+            continue
+        dist = dijkstra(forest, indices=int(members[0]))
+        u = int(members[np.argmax(dist[members])])
+        dist_u = dijkstra(forest, indices=u)
+        v = int(members[np.argmax(dist_u[members])])
+        if best is None or dist_u[v] > best[0]:
+            best = (float(dist_u[v]), u, v)
+    return None if best is None else (best[1], best[2])
+
+
+def _path(we: csr_matrix, source: int, target: int) -> tuple[list[int], float] | None:
+    dist, pred = dijkstra(we, directed=True, indices=source, return_predecessors=True)
+    if not np.isfinite(dist[target]):
+        return None
+    path = [target]
+    while path[-1] != source:
+        path.append(int(pred[path[-1]]))
+    return path[::-1], float(dist[target])
+
+
+def _corners_only(points: FloatArray) -> FloatArray:
+    """Drop chain nodes that lie on a straight stretch (no turn)."""
+    if len(points) <= 2:
+        return points
+    d_prev = points[1:-1] - points[:-2]
+    d_next = points[2:] - points[1:-1]
+    cross = d_prev[:, 0] * d_next[:, 1] - d_prev[:, 1] * d_next[:, 0]
+    keep = np.concatenate([[True], np.abs(cross) > 1e-6, [True]])
+    kept: FloatArray = points[keep]
+    return kept
+
+
+def find_wall_chain(lines: list[WallLine], params: LayoutParams) -> WallChain | None:
+    """Choose source and target and return the minimum-cost chain between them.
+
+    Parameters
+    ----------
+    lines : candidate wall lines of one fragment, aligned frame.
+    params : the complexity penalty lambda.
+
+    Returns
+    -------
+    WallChain or None when the fragment shows no wall.
+    """
+    if not lines:
+        return None
+    lines = lines + _occluded_links(lines, params.cell_size)
+    nodes = _build_nodes(lines)
+    we, st = _edges(lines, nodes, params.complexity_penalty)
+    ends = _tree_ends(st)
+    if ends is None:
+        return None
+    u, v = ends
+    forward, backward = _path(we, u, v), _path(we, v, u)
+    candidates = [p for p in (forward, backward) if p is not None]
+    if not candidates:
+        return None
+    order, cost = min(candidates, key=lambda pc: pc[1])
+    points = np.array([nodes.points[i] for i in order])
+    return WallChain(keypoints=_corners_only(points), cost=cost)

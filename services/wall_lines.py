@@ -1,0 +1,244 @@
+"""Candidate walls of one fragment on the projection grid (paper 3.1, wall estimation graph).
+
+Works in the aligned frame (z up, walls along x or y). A wall is an axis-parallel line with
+an offset found at sub-cell precision (a peak in the histogram of wall-point offsets) and a
+row of grid cells of size ``s`` along it. A cell on a line has high wall evidence when
+
+* its column is tall: at least N occupied ``s``-sized height bins (N*s of wall; N shrinks for
+  low rooms and sparse sensors, see :func:`evidence_threshold`), and
+* it bounds the scanned space: the strip behind it holds far less than the strip in front.
+  Furniture faces fail this (the wall behind them is seen above or beside them); real room
+  walls pass it and tell which side is the interior.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from schemas.params import LayoutParams
+from services.types import FloatArray
+
+__all__ = ["WallLine", "evidence_threshold", "find_wall_lines"]
+
+_HIST_BIN = 0.01  # m, offset histogram resolution
+_LINE_TOLERANCE = 0.05  # m, wall points kept around a line offset
+_MERGE_DISTANCE = 0.15  # m, parallel peaks closer than this are one wall
+_NEAR_STRIP = 0.12  # m, the strips skip the wall's own noisy band
+_FAR_STRIP = 1.0  # m, depth of the strips in front of and behind a wall
+_BEHIND_RATIO = 0.3  # behind/front occupancy above which a cell is not a boundary
+_MAX_GAP_CELLS = 2  # low cells bridged inside one candidate segment
+_TOP_REACH = 0.85  # share of the floor-to-ceiling band a wall column must reach
+
+
+@dataclass(frozen=True)
+class WallLine:
+    """An axis-parallel wall line and its per-cell evidence.
+
+    axis: 0 for a wall running along x (constant y), 1 for one running along y.
+    offset: the constant coordinate (y for axis 0, x for axis 1), meters.
+    travel: +1 or -1, the direction along the run axis that keeps the interior on the left.
+    origin: run coordinate of the first cell's lower edge; cells are ``cell_size`` long.
+    high: (C,) bool, high wall-evidence per cell.
+    segments: (S, 2) float64 run-coordinate spans [start, end] of the candidate segments.
+    virtual: True for a line deduced across an occluded stretch (no points of its own).
+    """
+
+    axis: int
+    offset: float
+    travel: int
+    origin: float
+    cell_size: float
+    high: NDArray[np.bool_]
+    segments: FloatArray
+    virtual: bool = False
+
+    def evidence(self, start: float, end: float) -> tuple[float, int]:
+        """Length L in cells and the count H of high cells between two run coordinates."""
+        lo, hi = sorted((start, end))
+        cum = np.concatenate([[0], np.cumsum(self.high)])
+        i0 = int(np.clip(np.rint((lo - self.origin) / self.cell_size), 0, len(self.high)))
+        i1 = int(np.clip(np.rint((hi - self.origin) / self.cell_size), 0, len(self.high)))
+        return (hi - lo) / self.cell_size, int(cum[i1] - cum[i0])
+
+    def point(self, run: float) -> FloatArray:
+        """The (x, y) point at run coordinate ``run`` on this line."""
+        return np.array([run, self.offset] if self.axis == 0 else [self.offset, run])
+
+
+def evidence_threshold(column_counts: NDArray[np.int64], band: float, params: LayoutParams) -> int:
+    """Effective N: the paper's N, capped by the wall height and the sensor's density.
+
+    A cell cannot hold more height bins than the band between floor and ceiling allows, and
+    a sparse sensor (few rings, long range) fills fewer of them; so N is capped at half the
+    band and at half the 90th percentile of occupied columns. This keeps "a wall stands
+    here" meaning the same for a dense RGB-D scan and a 16-ring LiDAR.
+    """
+    n = float(params.min_cell_points)
+    n = min(n, 0.5 * band / params.cell_size)
+    occupied = column_counts[column_counts > 0]
+    if len(occupied):
+        n = min(n, 0.5 * float(np.percentile(occupied, 90)))
+    return max(3, round(n))
+
+
+def _offset_peaks(offsets: FloatArray, min_support: float) -> FloatArray:
+    """Offsets of the walls: peaks of the smoothed offset histogram, strongest first."""
+    if len(offsets) == 0:
+        return np.zeros(0)
+    lo = float(offsets.min()) - 0.05
+    n_bins = int(np.ceil((float(offsets.max()) + 0.05 - lo) / _HIST_BIN)) + 1
+    hist = np.bincount(((offsets - lo) / _HIST_BIN).astype(np.int64), minlength=n_bins)
+    kernel = np.exp(-0.5 * (np.arange(-4, 5) / 1.5) ** 2)
+    window = np.convolve(hist, np.ones(2 * round(_LINE_TOLERANCE / _HIST_BIN) + 1), mode="same")
+    smooth = np.convolve(hist, kernel, mode="same")
+    order = np.argsort(-smooth)
+    peaks: list[float] = []
+    for idx in order[window[order] >= min_support]:
+        position = lo + (idx + 0.5) * _HIST_BIN
+        if all(abs(position - p) > _MERGE_DISTANCE for p in peaks):
+            peaks.append(position)
+    return np.asarray(peaks)
+
+
+def _runs(mask: NDArray[np.bool_], max_gap: int, min_len: int) -> list[tuple[int, int]]:
+    """Spans [i, j) of True cells, bridging gaps of at most ``max_gap`` False cells."""
+    idx = np.flatnonzero(mask)
+    if len(idx) == 0:
+        return []
+    breaks = np.flatnonzero(np.diff(idx) > max_gap + 1)
+    starts = np.concatenate([[idx[0]], idx[breaks + 1]])
+    ends = np.concatenate([idx[breaks], [idx[-1]]]) + 1
+    return [(int(s), int(e)) for s, e in zip(starts, ends, strict=True) if e - s >= min_len]
+
+
+@dataclass(frozen=True)
+class _Grid:
+    """Column occupancy of the whole fragment on the projection grid (aligned frame)."""
+
+    origin: FloatArray  # (2,) x, y of cell (0, 0)'s lower corner
+    cell: float
+    occupancy: NDArray[np.int64]  # (nx, ny) thinned points per column, any height
+
+    def strip_sums(self, axis: int, offset: float, cells: NDArray[np.int64]) -> FloatArray:
+        """Occupancy in the strips on the negative and positive side of a line, per cell.
+
+        Returns (2, C): row 0 behind (lower offset), row 1 in front (higher offset).
+        """
+        occ = self.occupancy if axis == 0 else self.occupancy.T
+        run_ok = (cells >= 0) & (cells < occ.shape[0])
+        cum = np.concatenate([np.zeros((occ.shape[0], 1)), np.cumsum(occ, axis=1)], axis=1)
+        base = self.origin[1 - axis]
+
+        def band(d0: float, d1: float) -> FloatArray:
+            # Whole cells only, so the wall's own noisy band never leaks into a strip.
+            j0 = int(np.clip(np.ceil((offset + d0 - base) / self.cell), 0, occ.shape[1]))
+            j1 = int(np.clip(np.floor((offset + d1 - base) / self.cell), 0, occ.shape[1]))
+            out = np.zeros(len(cells))
+            out[run_ok] = cum[cells[run_ok], j1] - cum[cells[run_ok], j0]
+            return out
+
+        return np.vstack([band(-_FAR_STRIP, -_NEAR_STRIP), band(_NEAR_STRIP, _FAR_STRIP)])
+
+
+def _make_grid(xy: FloatArray, cell: float) -> _Grid:
+    origin = np.floor(xy.min(axis=0) / cell) * cell - 2 * _FAR_STRIP
+    ij = ((xy - origin) / cell).astype(np.int64)
+    margin = int(3 * _FAR_STRIP / cell)
+    shape = (int(ij[:, 0].max()) + 1 + margin, int(ij[:, 1].max()) + 1 + margin)
+    flat = np.bincount(ij[:, 0] * shape[1] + ij[:, 1], minlength=shape[0] * shape[1])
+    occupancy = flat.reshape(shape).astype(np.int64)
+    return _Grid(origin=origin, cell=cell, occupancy=occupancy)
+
+
+@dataclass(frozen=True)
+class _TallRule:
+    """When a cell's column counts as standing wall: N height bins, reaching the top part
+    of the floor-to-ceiling band (furniture stops lower; walls reach the ceiling)."""
+
+    n: int
+    floor_z: float
+    top_bin: int
+
+
+def _lines_from_peak(
+    axis: int,
+    offset: float,
+    members: FloatArray,
+    grid: _Grid,
+    rule: _TallRule,
+    params: LayoutParams,
+) -> list[WallLine]:
+    """Evidence along one line from its member points (aligned frame, (M, 3)).
+
+    Each side is tried as the interior: a line yields one wall per side whose cells bound
+    the scanned space from that side (two walls when collinear walls face each other).
+    """
+    s = params.cell_size
+    origin = grid.origin[axis]
+    cells = ((members[:, axis] - origin) / s).astype(np.int64)
+    z_bins = np.clip(((members[:, 2] - rule.floor_z) / s).astype(np.int64), 0, 4095)
+    n_cells = int(cells.max()) + 1
+    keys = np.unique(cells * 4096 + z_bins)
+    reach = np.zeros(n_cells, dtype=np.int64)
+    np.maximum.at(reach, keys // 4096, keys % 4096)
+    tall = (np.bincount(keys // 4096, minlength=n_cells) >= rule.n) & (reach >= rule.top_bin)
+    behind, front = grid.strip_sums(axis, offset, np.arange(n_cells))
+    lines = []
+    for sign, near_side, far_side in ((1, front, behind), (-1, behind, front)):
+        high = tall & (far_side <= _BEHIND_RATIO * np.maximum(near_side, 1.0))
+        spans = _runs(high, _MAX_GAP_CELLS, params.min_wall_cells)
+        if not spans:
+            continue
+        segments = np.array([[origin + a * s, origin + b * s] for a, b in spans])
+        # Interior on the left: along x, interior +y means travelling +x; along y,
+        # interior +x means travelling -y.
+        travel = sign if axis == 0 else -sign
+        lines.append(WallLine(axis, offset, travel, origin, s, high, segments))
+    return lines
+
+
+def find_wall_lines(
+    aligned: FloatArray,
+    normals: FloatArray,
+    floor_z: float,
+    ceiling_z: float | None,
+    params: LayoutParams,
+) -> list[WallLine]:
+    """Detect candidate wall lines with their evidence.
+
+    Parameters
+    ----------
+    aligned : (M, 3) float64, thinned points in the aligned frame, meters.
+    normals : (M, 3) float64, their unit normals in the aligned frame.
+    floor_z, ceiling_z : heights in the aligned frame (ceiling None when unseen).
+    params : grid cell size, N, shortest segment.
+    """
+    if len(aligned) == 0:
+        return []
+    top = ceiling_z if ceiling_z is not None else float(np.percentile(aligned[:, 2], 99.5))
+    in_band = (aligned[:, 2] > floor_z + 0.1) & (aligned[:, 2] < top - 0.1)
+    band = max(top - floor_z - 0.2, params.cell_size)
+    grid = _make_grid(aligned[:, :2], params.cell_size)
+    columns = ((aligned[in_band, :2] - grid.origin) / params.cell_size).astype(np.int64)
+    z_bins = ((aligned[in_band, 2] - floor_z) / params.cell_size).astype(np.int64)
+    keys = np.unique((columns[:, 0] * grid.occupancy.shape[1] + columns[:, 1]) * 4096 + z_bins)
+    rule = _TallRule(
+        n=evidence_threshold(np.bincount(keys // 4096), band, params),
+        floor_z=floor_z,
+        top_bin=int((0.1 + _TOP_REACH * band) / params.cell_size),
+    )
+    lines: list[WallLine] = []
+    for axis in (0, 1):
+        offset_axis = 1 - axis
+        facing = in_band & (np.abs(normals[:, offset_axis]) > np.cos(np.radians(25.0)))
+        wall_points = aligned[facing]
+        min_support = params.min_wall_cells * rule.n * 0.5
+        for peak in _offset_peaks(wall_points[:, offset_axis], min_support):
+            near = np.abs(wall_points[:, offset_axis] - peak) < _LINE_TOLERANCE
+            members = wall_points[near]
+            offset = float(np.median(members[:, offset_axis]))
+            lines += _lines_from_peak(axis, offset, members, grid, rule, params)
+    return lines
