@@ -62,7 +62,9 @@ class PlacementParams(_Frozen):
     use_boundary: bool = True
     boundary_sigma: float = Field(0.05, gt=0, description="sigma of the mismatch CDF, m")
     min_boundary_points: int = Field(50, ge=1)
-    closure_tolerance: float = Field(0.5, gt=0, description="largest closure gap, m")
+    closure_tolerance: float = Field(
+        0.05, gt=0, description="largest gap left in the loop after refinement, m"
+    )
     top_k: int = Field(5, ge=1, description="runner-up placements kept for diagnostics")
 
 

@@ -1,0 +1,162 @@
+"""Orchestrator: the pipeline's stages in order, no I/O.
+
+``estimate_layout`` is the per-fragment stage (one job per fragment in the service);
+``place_site`` is the global stage (one job per site): placement, refinement, floorplan,
+and the contract's result.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from schemas.params import PipelineParams
+from schemas.result import (
+    FloorplanModel,
+    FragmentResultModel,
+    LocalLayoutModel,
+    ResultModel,
+    RoomModel,
+)
+from services.layout_model import build_polygon
+from services.local_layout import estimate_local_layout
+from services.placement import Placement, make_piece, place_pieces, rot90
+from services.refinement import refine_translations
+from services.types import FloatArray, LocalLayout
+
+__all__ = ["ProgressFn", "estimate_layout", "fragment_pose", "place_site"]
+
+ProgressFn = Callable[[str, float], None]
+
+
+def estimate_layout(
+    points: FloatArray,
+    params: PipelineParams = PipelineParams(),
+    progress: ProgressFn | None = None,
+) -> LocalLayout:
+    """Local layout of one fragment; see :func:`services.local_layout.estimate_local_layout`."""
+    return estimate_local_layout(points, params, progress)
+
+
+def fragment_pose(layout: LocalLayout, rotation: int, source_site: FloatArray) -> FloatArray:
+    """4x4 pose mapping fragment-local points to the site frame.
+
+    The Manhattan alignment (tilt included), then ``rotation`` quarter turns about z, then
+    the translation that puts the chain's source at ``source_site`` and the floor at z = 0.
+    """
+    spin = np.eye(3)
+    spin[:2, :2] = rot90(rotation)
+    pose = np.eye(4)
+    pose[:3, :3] = spin @ layout.frame.rotation
+    pose[:2, 3] = source_site - rot90(rotation) @ layout.keypoints[0]
+    pose[2, 3] = -layout.frame.floor_z
+    return pose
+
+
+def _room_height(layouts: Sequence[LocalLayout]) -> float | None:
+    heights = [
+        lay.frame.ceiling_z - lay.frame.floor_z
+        for lay in layouts
+        if lay.frame.ceiling_z is not None
+    ]
+    return float(np.median(heights)) if heights else None
+
+
+def _diagnostics(
+    placement: Placement, refinement_status: str, gaps: tuple[float, float]
+) -> dict[str, Any]:
+    best = placement.best
+    return {
+        "energy": {
+            "total": best.energy,
+            "complexity": best.complexity,
+            "closure": best.closure,
+            "boundary": best.boundary,
+        },
+        "energy_margin": (
+            placement.alternatives[0].energy - best.energy if placement.alternatives else None
+        ),
+        "alternatives": [
+            {"energy": alt.energy, "order": list(alt.order), "rotations": list(alt.rotations)}
+            for alt in placement.alternatives
+        ],
+        "search": {"nodes": placement.nodes_searched, "exhaustive": placement.exhaustive},
+        "refinement": {
+            "status": refinement_status,
+            "violation_before": gaps[0],
+            "violation_after": gaps[1],
+        },
+    }
+
+
+def place_site(
+    layouts: Mapping[str, LocalLayout],
+    params: PipelineParams = PipelineParams(),
+    progress: ProgressFn | None = None,
+    order_hint: Sequence[str] | None = None,
+    neighbours: Sequence[tuple[str, str]] = (),
+) -> ResultModel:
+    """Place every fragment of a site and build the contract's result.
+
+    Parameters
+    ----------
+    layouts : local layout per fragment id; fragments keep this order in the result.
+    params : algorithm parameters (placement section used here).
+    progress : optional callback ``(stage, fraction)``.
+    order_hint, neighbours : optional user constraints on the loop order.
+    """
+    report = progress or (lambda stage, fraction: None)
+    fragments = {
+        fid: FragmentResultModel(
+            id=fid,
+            placed=False,
+            local_layout=LocalLayoutModel(keypoints=lay.keypoints_local().tolist()),
+        )
+        for fid, lay in layouts.items()
+    }
+    usable = [fid for fid, lay in layouts.items() if lay.ok]
+    report("placement", 0.1)
+    pieces = {fid: make_piece(fid, layouts[fid]) for fid in usable}
+    placement = place_pieces(list(pieces.values()), params.placement, order_hint, neighbours)
+    if placement is None:
+        report("done", 1.0)
+        return ResultModel(
+            status="failed",
+            fragments=list(fragments.values()),
+            diagnostics={"reason": "no fragment shows a wall"},
+        )
+    report("refinement", 0.7)
+    best = placement.best
+    ordered = [pieces[fid] for fid in best.order]
+    refined = refine_translations(ordered, best.rotations, placement.translations)
+    translations = refined.translations
+    for index, (fid, rotation) in enumerate(zip(best.order, best.rotations, strict=True)):
+        pose = fragment_pose(layouts[fid], rotation, translations[index])
+        fragments[fid].placed = True
+        fragments[fid].pose = pose.tolist()
+        fragments[fid].loop_index = index
+    closed = (
+        placement.closed
+        and len(usable) == len(layouts)
+        and len(usable) >= 2
+        and refined.status == "solved"
+        and refined.violation_after <= params.placement.closure_tolerance
+    )
+    rooms = []
+    if closed:
+        polygon = build_polygon(ordered, best.rotations, translations)
+        height = _room_height([layouts[fid] for fid in usable])
+        rooms.append(
+            RoomModel(id="room_0", polygon=polygon.tolist(), floor_z=0.0, ceiling_z=height)
+        )
+    report("done", 1.0)
+    return ResultModel(
+        status="closed" if closed else "open",
+        fragments=list(fragments.values()),
+        floorplan=FloorplanModel(rooms=rooms),
+        diagnostics=_diagnostics(
+            placement, refined.status, (refined.violation_before, refined.violation_after)
+        ),
+    )

@@ -1,0 +1,394 @@
+"""Global placement: a rotation and a loop position for every fragment (paper 3.2).
+
+Each fragment's wall chain is a piece of the room's counter-clockwise boundary loop. The
+pieces are concatenated end to end (source of one at the target of the previous); a
+placement chooses their order and each piece's rotation (one of four after up alignment).
+The energy is E_l + E_c + E_b: layout complexity (corners plus convex-hull edges), closure
+gap (Manhattan distance, meters) and boundary mismatch between neighbours.
+
+Search is depth-first branch and bound. What a simple rectilinear counter-clockwise loop
+implies cuts the tree: a junction continues the wall or turns by 90 degrees (never folds
+back), so a rotation follows from the junction's turn; the turns of the loop add up to one
+full turn (+4 quarter turns); walls may not cross or overlap; and the closure gap can only
+shrink by as much as the pieces still to place can span.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+from scipy.special import erf
+
+from schemas.params import PlacementParams
+from services.types import FloatArray, LocalLayout
+
+__all__ = ["Piece", "Placement", "PlacementCandidate", "make_piece", "place_pieces", "rot90"]
+
+_TURNS = (0, 1, -1)  # continue, turn left (convex corner), turn right (concave corner)
+_CROSS_EPS = 0.05  # m, walls may touch within this distance but not cross
+_MAX_NODES = 400_000  # search nodes before giving up on proving optimality
+
+
+def rot90(quarter_turns: int) -> FloatArray:
+    """2x2 rotation by ``quarter_turns`` * 90 degrees counter-clockwise."""
+    c, s = [(1, 0), (0, 1), (-1, 0), (0, -1)][quarter_turns % 4]
+    return np.array([[c, -s], [s, c]], dtype=np.float64)
+
+
+def _direction_index(v: FloatArray) -> int:
+    """0: +x, 1: +y, 2: -x, 3: -y for an axis-parallel vector."""
+    if abs(v[0]) >= abs(v[1]):
+        return 0 if v[0] > 0 else 2
+    return 1 if v[1] > 0 else 3
+
+
+@dataclass(frozen=True)
+class Piece:
+    """One fragment's chain prepared for placement, aligned frame with the source at 0.
+
+    keypoints: (K, 2) float64, source first (at the origin), interior on the left.
+    directions: (K-1,) int, direction index of each wall.
+    source_boundary, target_boundary: (M, 3) float64, boundary points relative to the
+    source / target keypoint, floor at z = 0.
+    """
+
+    id: str
+    keypoints: FloatArray
+    directions: tuple[int, ...]
+    source_boundary: FloatArray
+    target_boundary: FloatArray
+
+    @property
+    def turning(self) -> int:
+        """Signed quarter turns inside the chain (left +1, right -1)."""
+        steps = np.diff(np.asarray(self.directions)) % 4
+        return int(np.sum(steps == 1) - np.sum(steps == 3))
+
+    @property
+    def corners(self) -> int:
+        return len(self.keypoints) - 2
+
+    @property
+    def span_l1(self) -> float:
+        """Manhattan length of source->target; unchanged by quarter-turn rotations."""
+        return float(np.abs(self.keypoints[-1]).sum())
+
+
+def make_piece(fragment_id: str, layout: LocalLayout) -> Piece:
+    """Prepare a local layout (with at least one wall) for placement."""
+    kp = layout.keypoints - layout.keypoints[0]
+    dirs = tuple(_direction_index(d) for d in np.diff(kp, axis=0))
+    floor = np.array([0.0, 0.0, layout.frame.floor_z])
+    src = layout.source_boundary - np.concatenate([layout.keypoints[0], [0.0]]) - floor
+    tgt = layout.target_boundary - np.concatenate([layout.keypoints[-1], [0.0]]) - floor
+    return Piece(fragment_id, kp, dirs, src, tgt)
+
+
+@dataclass(frozen=True)
+class PlacementCandidate:
+    """A complete placement and its energy terms."""
+
+    energy: float
+    order: tuple[str, ...]
+    rotations: tuple[int, ...]  # quarter turns per piece, in loop order
+    complexity: float
+    closure: float
+    boundary: float
+
+
+@dataclass(frozen=True)
+class Placement:
+    """The best placement, its translations, and the runners-up.
+
+    translations: (n, 2) float64, site position of each piece's source, loop order.
+    closed: True when the pieces form one simple counter-clockwise loop (turns add up to a
+    full turn); the gap left at its end is closed by the refinement.
+    """
+
+    best: PlacementCandidate
+    translations: FloatArray
+    alternatives: tuple[PlacementCandidate, ...]
+    nodes_searched: int
+    exhaustive: bool
+    closed: bool
+
+
+def _boundary_mismatch(a: Piece, b: Piece, turn: int, params: PlacementParams) -> float:
+    """Supplementary's mismatch score of b's head placed after a's tail with ``turn``."""
+    if min(len(a.target_boundary), len(b.source_boundary)) < params.min_boundary_points:
+        return 0.5
+    # Common frame: a's last wall along +x, the junction at the origin.
+    ra = rot90(-a.directions[-1])
+    rb = rot90(turn - b.directions[0])
+    pa = np.column_stack([a.target_boundary[:, :2] @ ra.T, a.target_boundary[:, 2]])
+    pb = np.column_stack([b.source_boundary[:, :2] @ rb.T, b.source_boundary[:, 2]])
+    d_ab, _ = cKDTree(pb).query(pa)
+    d_ba, _ = cKDTree(pa).query(pb)
+    # Phi(d/sigma) - Phi(-d/sigma) = erf(d / (sigma sqrt 2)).
+    scores = erf(np.concatenate([d_ab, d_ba]) / (params.boundary_sigma * np.sqrt(2.0)))
+    return float(scores.mean())
+
+
+def _hull_edges(points: FloatArray) -> int:
+    """Edges of the convex hull (collinear points dropped), monotone chain."""
+    pts = np.unique(np.round(points, 3), axis=0)
+    if len(pts) < 3:
+        return len(pts)
+
+    def half(seq: FloatArray) -> list[FloatArray]:
+        out: list[FloatArray] = []
+        for p in seq:
+            while len(out) >= 2:
+                o, a = out[-2], out[-1]
+                if (a[0] - o[0]) * (p[1] - o[1]) - (a[1] - o[1]) * (p[0] - o[0]) > 1e-9:
+                    break
+                out.pop()
+            out.append(p)
+        return out
+
+    lower, upper = half(pts), half(pts[::-1])
+    return len(lower) + len(upper) - 2
+
+
+@dataclass
+class _Search:
+    pieces: list[Piece]
+    params: PlacementParams
+    mismatch: dict[tuple[int, int, int], float]
+    successor: dict[int, int]
+    predecessor: dict[int, int]
+    require_closed: bool
+    top: list[tuple[float, int, PlacementCandidate]] = field(default_factory=list)
+    nodes: int = 0
+    counter: itertools.count[int] = field(default_factory=itertools.count)
+
+    def weights(self) -> tuple[float, float, float]:
+        p = self.params
+        return (float(p.use_complexity), float(p.use_closure), float(p.use_boundary))
+
+    def bound(self) -> float:
+        if len(self.top) < self.params.top_k:
+            return np.inf
+        return -self.top[0][0]
+
+    def record(self, cand: PlacementCandidate) -> None:
+        item = (-cand.energy, next(self.counter), cand)
+        if len(self.top) < self.params.top_k:
+            heapq.heappush(self.top, item)
+        elif cand.energy < -self.top[0][0]:
+            heapq.heapreplace(self.top, item)
+
+
+def _walls(points: FloatArray) -> FloatArray:
+    """(W, 4) rows (axis, offset, lo, hi) of an axis-parallel chain."""
+    a, b = points[:-1], points[1:]
+    along_x = np.abs(b[:, 0] - a[:, 0]) >= np.abs(b[:, 1] - a[:, 1])
+    offset = np.where(along_x, a[:, 1], a[:, 0])
+    lo = np.where(along_x, np.minimum(a[:, 0], b[:, 0]), np.minimum(a[:, 1], b[:, 1]))
+    hi = np.where(along_x, np.maximum(a[:, 0], b[:, 0]), np.maximum(a[:, 1], b[:, 1]))
+    return np.column_stack([np.where(along_x, 0.0, 1.0), offset, lo, hi])
+
+
+def _crosses(new: FloatArray, placed: FloatArray) -> bool:
+    """True when a new wall crosses or overlaps a placed one (touching is allowed)."""
+    if len(placed) == 0 or len(new) == 0:
+        return False
+    a = new[:, None, :]
+    b = placed[None, :, :]
+    perpendicular = a[..., 0] != b[..., 0]
+    inside_a = (b[..., 1] > a[..., 2] + _CROSS_EPS) & (b[..., 1] < a[..., 3] - _CROSS_EPS)
+    inside_b = (a[..., 1] > b[..., 2] + _CROSS_EPS) & (a[..., 1] < b[..., 3] - _CROSS_EPS)
+    overlap = np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 2], b[..., 2])
+    collinear = ~perpendicular & (np.abs(a[..., 1] - b[..., 1]) < 2 * _CROSS_EPS)
+    return bool(
+        np.any(perpendicular & inside_a & inside_b) or np.any(collinear & (overlap > _CROSS_EPS))
+    )
+
+
+def _trim_start(walls: FloatArray, start: FloatArray, length: float) -> FloatArray:
+    """Shorten the loop's first wall at its start: the closing piece may overshoot it by
+    up to the closure tolerance (neighbouring scans overlap) without crossing it."""
+    out = walls.copy()
+    axis, _, lo, hi = out[0]
+    run = start[0] if axis == 0 else start[1]
+    if abs(run - lo) <= abs(run - hi):
+        out[0, 2] = min(lo + length, hi)
+    else:
+        out[0, 3] = max(hi - length, lo)
+    return out
+
+
+@dataclass(frozen=True)
+class _State:
+    order: tuple[int, ...]
+    rotations: tuple[int, ...]
+    end: FloatArray
+    heading: int
+    turning: int
+    corners: int
+    boundary: float
+    walls: FloatArray
+    vertices: FloatArray
+
+
+def _extend(search: _Search, state: _State, j: int, turn: int) -> _State | None:
+    piece = search.pieces[j]
+    rotation = (state.heading + turn - piece.directions[0]) % 4
+    pts = piece.keypoints @ rot90(rotation).T + state.end
+    walls = _walls(pts)
+    if _crosses(walls, state.walls):
+        return None
+    return _State(
+        order=(*state.order, j),
+        rotations=(*state.rotations, rotation),
+        end=pts[-1],
+        heading=(piece.directions[-1] + rotation) % 4,
+        turning=state.turning + turn + piece.turning,
+        corners=state.corners + (turn != 0) + piece.corners,
+        boundary=state.boundary + search.mismatch[(state.order[-1], j, turn)],
+        walls=np.vstack([state.walls, walls]),
+        vertices=np.vstack([state.vertices, pts]),
+    )
+
+
+def _close(search: _Search, state: _State) -> None:
+    first = search.pieces[0]
+    turn = (first.directions[0] - state.heading) % 4
+    turn = {0: 0, 1: 1, 3: -1}.get(turn, 2)
+    closed_ok = turn != 2 and state.turning + turn == 4
+    if search.require_closed and not closed_ok:
+        return
+    w_l, w_c, w_b = search.weights()
+    complexity = state.corners + (turn not in (0, 2)) + _hull_edges(state.vertices)
+    closure = float(np.abs(state.end).sum())
+    boundary = state.boundary + (search.mismatch[(state.order[-1], 0, turn)] if turn != 2 else 1.0)
+    energy = w_l * complexity + w_c * closure + w_b * boundary
+    ids = tuple(search.pieces[i].id for i in state.order)
+    search.record(PlacementCandidate(energy, ids, state.rotations, complexity, closure, boundary))
+
+
+def _lower_bound(search: _Search, state: _State, remaining: Sequence[int]) -> float:
+    w_l, w_c, w_b = search.weights()
+    span = sum(search.pieces[i].span_l1 for i in remaining)
+    closure = max(0.0, float(np.abs(state.end).sum()) - span)
+    corners = state.corners + sum(search.pieces[i].corners for i in remaining)
+    return w_l * (corners + 4) + w_c * closure + w_b * state.boundary
+
+
+def _dfs(search: _Search, state: _State, remaining: tuple[int, ...]) -> None:
+    search.nodes += 1
+    if search.nodes > _MAX_NODES:
+        return
+    if not remaining:
+        _close(search, state)
+        return
+    if _lower_bound(search, state, remaining) >= search.bound():
+        return
+    k = len(remaining)
+    options: list[tuple[float, int, int]] = []
+    prev = state.order[-1]
+    fixed = state.turning + sum(search.pieces[i].turning for i in remaining)
+    for j in remaining:
+        if search.successor.get(prev, j) != j or search.predecessor.get(j, prev) != prev:
+            continue
+        for turn in _TURNS:
+            # The loop's turns add up to +4; the k junctions after this one give +-1 each.
+            if search.require_closed and abs(4 - fixed - turn) > k:
+                continue
+            options.append((search.mismatch[(prev, j, turn)] + abs(turn), j, turn))
+    for _, j, turn in sorted(options):
+        child = _extend(search, state, j, turn)
+        if child is not None:
+            _dfs(search, child, tuple(i for i in remaining if i != j))
+
+
+def _constraint_maps(
+    ids: list[str], order_hint: Sequence[str] | None, neighbours: Sequence[tuple[str, str]]
+) -> tuple[dict[int, int], dict[int, int]]:
+    index = {fid: i for i, fid in enumerate(ids)}
+    pairs = list(neighbours)
+    if order_hint:
+        pairs += list(itertools.pairwise(order_hint))
+    successor = {index[a]: index[b] for a, b in pairs if a in index and b in index}
+    predecessor = {b: a for a, b in successor.items()}
+    return successor, predecessor
+
+
+def place_pieces(
+    pieces: Sequence[Piece],
+    params: PlacementParams = PlacementParams(),
+    order_hint: Sequence[str] | None = None,
+    neighbours: Sequence[tuple[str, str]] = (),
+) -> Placement | None:
+    """Find the minimum-energy placement of the pieces in one counter-clockwise loop.
+
+    Parameters
+    ----------
+    pieces : chains with at least one wall each; the first is fixed (rotation 0, loop
+        position 0, source at the site origin), which removes the global symmetry.
+    params : energy switches, sigma, top-k.
+    order_hint : optional known loop order of (some) fragment ids.
+    neighbours : optional known (a, b) pairs: b follows a in the loop.
+
+    Returns
+    -------
+    Placement or None when no placement exists (not even an open one).
+    """
+    if not pieces:
+        return None
+    n = len(pieces)
+    mismatch = {
+        (a, b, t): _boundary_mismatch(pieces[a], pieces[b], t, params)
+        for a in range(n)
+        for b in range(n)
+        for t in _TURNS
+        if a != b or n == 1
+    }
+    successor, predecessor = _constraint_maps([p.id for p in pieces], order_hint, neighbours)
+    first = pieces[0]
+    root = _State(
+        order=(0,),
+        rotations=(0,),
+        end=first.keypoints[-1].copy(),
+        heading=first.directions[-1],
+        turning=first.turning,
+        corners=first.corners,
+        boundary=0.0,
+        walls=_trim_start(_walls(first.keypoints), first.keypoints[0], params.closure_tolerance),
+        vertices=first.keypoints.copy(),
+    )
+    nodes = 0
+    for require_closed in (True, False):
+        search = _Search(list(pieces), params, mismatch, successor, predecessor, require_closed)
+        _dfs(search, root, tuple(range(1, n)))
+        nodes += search.nodes
+        if search.top:
+            break
+    if not search.top:
+        return None
+    ranked = [c for _, _, c in sorted(search.top, key=lambda item: -item[0])]
+    best = ranked[0]
+    return Placement(
+        best=best,
+        translations=_translations(pieces, best),
+        alternatives=tuple(ranked[1:]),
+        nodes_searched=nodes,
+        exhaustive=search.nodes <= _MAX_NODES,
+        closed=require_closed,
+    )
+
+
+def _translations(pieces: Sequence[Piece], cand: PlacementCandidate) -> FloatArray:
+    """Site position of each piece's source after end-to-end concatenation."""
+    by_id: Mapping[str, Piece] = {p.id: p for p in pieces}
+    end = np.zeros(2)
+    out = []
+    for fid, rotation in zip(cand.order, cand.rotations, strict=True):
+        out.append(end.copy())
+        end = end + by_id[fid].keypoints[-1] @ rot90(rotation).T
+    return np.asarray(out)
