@@ -27,7 +27,8 @@ def decode_array(text: str, columns: int) -> FloatArray:
 class LocalLayoutWire(BaseModel):
     """A :class:`services.types.LocalLayout` as versioned JSON.
 
-    Boundary points are base64 little-endian float64 (M, 3) arrays in the aligned frame.
+    Boundary points and the footprint are base64 little-endian float64 arrays ((M, 3) and
+    (F, 2)) in the aligned frame.
     """
 
     model_config = ConfigDict(frozen=True)
@@ -39,6 +40,7 @@ class LocalLayoutWire(BaseModel):
     ceiling_z: float | None
     source_boundary: str = ""
     target_boundary: str = ""
+    footprint: str = ""
 
     @classmethod
     def from_layout(cls, layout: LocalLayout) -> LocalLayoutWire:
@@ -49,6 +51,7 @@ class LocalLayoutWire(BaseModel):
             ceiling_z=layout.frame.ceiling_z,
             source_boundary=encode_array(layout.source_boundary),
             target_boundary=encode_array(layout.target_boundary),
+            footprint=encode_array(layout.footprint),
         )
 
     def to_layout(self) -> LocalLayout:
@@ -62,4 +65,5 @@ class LocalLayoutWire(BaseModel):
             frame=frame,
             source_boundary=decode_array(self.source_boundary, 3),
             target_boundary=decode_array(self.target_boundary, 3),
+            footprint=decode_array(self.footprint, 2),
         )

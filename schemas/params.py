@@ -60,7 +60,16 @@ class PlacementParams(_Frozen):
     use_complexity: bool = True
     use_closure: bool = True
     use_boundary: bool = True
-    boundary_sigma: float = Field(0.05, gt=0, description="sigma of the mismatch CDF, m")
+    use_free_space: bool = Field(
+        True, description="penalise scanned space that a placement puts outside the room"
+    )
+    free_space_weight: float = Field(
+        10.0, ge=0, description="energy per fragment lying wholly outside the room"
+    )
+    free_space_margin: float = Field(
+        0.3, ge=0, description="footprint cells this close outside a wall still count inside, m"
+    )
+    boundary_sigma: float = Field(0.10, gt=0, description="sigma of the mismatch CDF, m")
     min_boundary_points: int = Field(50, ge=1)
     closure_tolerance: float = Field(
         0.05, gt=0, description="largest gap left in the loop after refinement, m"

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from services.synthetic_room import points_in_polygon
+from services.geometry import points_in_polygon
 from services.types import FloatArray
 
 __all__ = [

@@ -8,16 +8,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from services.geometry import signed_area
 from services.placement import Piece, rot90
 from services.types import FloatArray
 
-__all__ = ["LayoutMesh", "build_polygon", "layout_mesh", "signed_area"]
-
-
-def signed_area(polygon: FloatArray) -> float:
-    """Shoelace area, positive for counter-clockwise (V, 2) polygons."""
-    x, y = polygon[:, 0], polygon[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+__all__ = ["LayoutMesh", "build_polygon", "layout_mesh"]
 
 
 def _simplify(points: FloatArray, tolerance: float = 1e-3) -> FloatArray:

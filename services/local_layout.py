@@ -12,10 +12,12 @@ from services.types import FloatArray, LocalLayout
 from services.wall_graph import find_wall_chain
 from services.wall_lines import find_wall_lines
 
-__all__ = ["boundary_points", "estimate_local_layout"]
+__all__ = ["boundary_points", "estimate_local_layout", "footprint_cells"]
 
 ProgressFn = Callable[[str, float], None]
 _MAX_BOUNDARY_POINTS = 2000
+_FOOTPRINT_CELL = 0.25  # m
+_FOOTPRINT_MIN_POINTS = 4
 
 
 def boundary_points(
@@ -37,6 +39,26 @@ def boundary_points(
     near = aligned[np.abs(distance) < band]
     stride = max(1, int(np.ceil(len(near) / _MAX_BOUNDARY_POINTS)))
     return near[::stride].copy()
+
+
+def footprint_cells(aligned: FloatArray, cell: float = _FOOTPRINT_CELL) -> FloatArray:
+    """Centres of the coarse cells holding at least a few points (outliers drop out).
+
+    Parameters
+    ----------
+    aligned : (M, 3) float64, thinned points in the aligned frame.
+    cell : cell size, meters.
+
+    Returns
+    -------
+    (F, 2) float64 cell centres, aligned frame.
+    """
+    if len(aligned) == 0:
+        return np.zeros((0, 2))
+    ij = np.floor(aligned[:, :2] / cell).astype(np.int64)
+    cells, counts = np.unique(ij, axis=0, return_counts=True)
+    centres: FloatArray = ((cells[counts >= _FOOTPRINT_MIN_POINTS] + 0.5) * cell).astype(np.float64)
+    return centres
 
 
 def _unit(v: FloatArray) -> FloatArray:
@@ -75,7 +97,9 @@ def estimate_local_layout(
     chain = find_wall_chain(lines, params.layout)
     if chain is None or len(chain.keypoints) < 2:
         report("done", 1.0)
-        return LocalLayout(keypoints=np.zeros((0, 2)), frame=frame)
+        return LocalLayout(
+            keypoints=np.zeros((0, 2)), frame=frame, footprint=footprint_cells(aligned)
+        )
     kp = chain.keypoints
     band = params.layout.boundary_band
     layout = LocalLayout(
@@ -83,6 +107,7 @@ def estimate_local_layout(
         frame=frame,
         source_boundary=boundary_points(aligned, kp[0], _unit(kp[1] - kp[0]), band),
         target_boundary=boundary_points(aligned, kp[-1], _unit(kp[-1] - kp[-2]), band),
+        footprint=footprint_cells(aligned),
     )
     report("done", 1.0)
     return layout

@@ -32,6 +32,7 @@ __all__ = ["Piece", "Placement", "PlacementCandidate", "make_piece", "place_piec
 _TURNS = (0, 1, -1)  # continue, turn left (convex corner), turn right (concave corner)
 _CROSS_EPS = 0.05  # m, walls may touch within this distance but not cross
 _MAX_NODES = 400_000  # search nodes before giving up on proving optimality
+_HULL_TOLERANCE = 0.35  # m, hull vertices closer than this to their chord are dropped
 
 
 def rot90(quarter_turns: int) -> FloatArray:
@@ -55,6 +56,7 @@ class Piece:
     directions: (K-1,) int, direction index of each wall.
     source_boundary, target_boundary: (M, 3) float64, boundary points relative to the
     source / target keypoint, floor at z = 0.
+    footprint: (F, 2) float64, scanned floor-plan cells relative to the source.
     """
 
     id: str
@@ -62,6 +64,7 @@ class Piece:
     directions: tuple[int, ...]
     source_boundary: FloatArray
     target_boundary: FloatArray
+    footprint: FloatArray
 
     @property
     def turning(self) -> int:
@@ -86,7 +89,8 @@ def make_piece(fragment_id: str, layout: LocalLayout) -> Piece:
     floor = np.array([0.0, 0.0, layout.frame.floor_z])
     src = layout.source_boundary - np.concatenate([layout.keypoints[0], [0.0]]) - floor
     tgt = layout.target_boundary - np.concatenate([layout.keypoints[-1], [0.0]]) - floor
-    return Piece(fragment_id, kp, dirs, src, tgt)
+    footprint = layout.footprint - layout.keypoints[0]
+    return Piece(fragment_id, kp, dirs, src, tgt, footprint)
 
 
 @dataclass(frozen=True)
@@ -99,6 +103,7 @@ class PlacementCandidate:
     complexity: float
     closure: float
     boundary: float
+    free_space: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -151,8 +156,20 @@ def _hull_edges(points: FloatArray) -> int:
             out.append(p)
         return out
 
-    lower, upper = half(pts), half(pts[::-1])
-    return len(lower) + len(upper) - 2
+    hull = np.array(half(pts)[:-1] + half(pts[::-1])[:-1])
+    # Unrefined chains leave small gaps; a hull vertex barely off the line through its
+    # neighbours is such a gap, not an edge of the room.
+    while len(hull) > 3:
+        prev, nxt = np.roll(hull, 1, axis=0), np.roll(hull, -1, axis=0)
+        chord = nxt - prev
+        lever = hull - prev
+        off = np.abs(chord[:, 0] * lever[:, 1] - chord[:, 1] * lever[:, 0])
+        off /= np.maximum(np.linalg.norm(chord, axis=1), 1e-9)
+        weakest = int(np.argmin(off))
+        if off[weakest] >= _HULL_TOLERANCE:
+            break
+        hull = np.delete(hull, weakest, axis=0)
+    return len(hull)
 
 
 @dataclass

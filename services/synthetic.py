@@ -17,8 +17,9 @@ from typing import Any
 
 import numpy as np
 
+from services.geometry import signed_area
 from services.synthetic_furniture import Furnishing, furnish_room
-from services.synthetic_room import Room, random_rectilinear_polygon, signed_area
+from services.synthetic_room import Room, random_rectilinear_polygon
 from services.synthetic_scan import ScanStyle, Stretch, sample_scan, stretch_keypoints
 from services.types import FloatArray
 

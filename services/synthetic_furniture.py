@@ -11,7 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from services.synthetic_room import Room, points_in_polygon, signed_area
+from services.geometry import points_in_polygon, signed_area
+from services.synthetic_room import Room
 from services.types import FloatArray
 
 __all__ = ["Box", "Furnishing", "Opening", "WallCover", "furnish_room"]

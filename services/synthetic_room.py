@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from services.geometry import points_in_polygon, signed_area
 from services.types import FloatArray
 
 __all__ = [
@@ -68,42 +69,6 @@ class Room:
     def n_edges(self) -> int:
         """Number of edges (equal to the number of corners)."""
         return len(self.polygon)
-
-
-def signed_area(polygon: FloatArray) -> float:
-    """Shoelace area of a (V, 2) polygon: positive when counter-clockwise.
-
-    >>> signed_area(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]))
-    1.0
-    >>> signed_area(np.zeros((0, 2)))
-    0.0
-    """
-    if len(polygon) < 3:
-        return 0.0
-    x, y = polygon[:, 0], polygon[:, 1]
-    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
-
-
-def points_in_polygon(xy: FloatArray, polygon: FloatArray) -> BoolArray:
-    """Even-odd test of (M, 2) points against a (V, 2) polygon; returns (M,) bool.
-
-    Vectorised over points, looping over edges.
-
-    >>> square = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
-    >>> points_in_polygon(np.array([[1.0, 1.0], [3.0, 1.0]]), square).tolist()
-    [True, False]
-    >>> points_in_polygon(np.zeros((0, 2)), square).shape
-    (0,)
-    """
-    x, y = xy[:, 0], xy[:, 1]
-    inside = np.zeros(len(xy), dtype=bool)
-    for (x1, y1), (x2, y2) in zip(polygon, np.roll(polygon, -1, axis=0), strict=True):
-        if y1 == y2:
-            continue  # horizontal edges never cross a horizontal ray
-        crosses = (y1 > y) != (y2 > y)
-        x_cross = x1 + (y - y1) * ((x2 - x1) / (y2 - y1))
-        inside ^= crosses & (x < x_cross)
-    return inside
 
 
 def nearest_boundary(xy: FloatArray, room: Room) -> tuple[FloatArray, FloatArray]:

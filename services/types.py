@@ -59,12 +59,15 @@ class LocalLayout:
     frame: the fragment's Manhattan frame.
     source_boundary, target_boundary: (M, 3) float64, aligned frame: points within the
     boundary band of the cutting planes through the source and target.
+    footprint: (F, 2) float64, aligned frame: centres of the coarse floor-plan cells the
+    scan covers (where the scanner saw space); they must end up inside the room.
     """
 
     keypoints: FloatArray
     frame: ManhattanFrame
     source_boundary: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
     target_boundary: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    footprint: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
 
     @property
     def ok(self) -> bool:

@@ -1,0 +1,68 @@
+"""Plane-polygon geometry shared by the pipeline, the generator and the evaluation.
+
+Polygons are (V, 2) float64, first vertex not repeated; counter-clockwise means interior on
+the left of every edge.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from services.types import FloatArray
+
+__all__ = ["distance_to_polygon", "points_in_polygon", "signed_area"]
+
+BoolArray = NDArray[np.bool_]
+
+
+def signed_area(polygon: FloatArray) -> float:
+    """Shoelace area of a (V, 2) polygon: positive when counter-clockwise.
+
+    >>> signed_area(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]))
+    1.0
+    >>> signed_area(np.zeros((0, 2)))
+    0.0
+    """
+    if len(polygon) < 3:
+        return 0.0
+    x, y = polygon[:, 0], polygon[:, 1]
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def points_in_polygon(xy: FloatArray, polygon: FloatArray) -> BoolArray:
+    """Even-odd test of (M, 2) points against a (V, 2) polygon; returns (M,) bool.
+
+    Vectorised over points, looping over edges.
+
+    >>> square = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
+    >>> points_in_polygon(np.array([[1.0, 1.0], [3.0, 1.0]]), square).tolist()
+    [True, False]
+    >>> points_in_polygon(np.zeros((0, 2)), square).shape
+    (0,)
+    """
+    x, y = xy[:, 0], xy[:, 1]
+    inside = np.zeros(len(xy), dtype=bool)
+    for (x1, y1), (x2, y2) in zip(polygon, np.roll(polygon, -1, axis=0), strict=True):
+        if y1 == y2:
+            continue  # horizontal edges never cross a horizontal ray
+        crosses = (y1 > y) != (y2 > y)
+        x_cross = x1 + (y - y1) * ((x2 - x1) / (y2 - y1))
+        inside ^= crosses & (x < x_cross)
+    return inside
+
+
+def distance_to_polygon(xy: FloatArray, polygon: FloatArray) -> FloatArray:
+    """Distance from (M, 2) points to the nearest edge of a (V, 2) polygon; (M,) float64.
+
+    >>> square = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
+    >>> distance_to_polygon(np.array([[1.0, 1.0], [3.0, 1.0]]), square).tolist()
+    [1.0, 1.0]
+    """
+    a = polygon[None, :, :]
+    ab = np.roll(polygon, -1, axis=0)[None, :, :] - a
+    ap = xy[:, None, :] - a
+    t = np.clip((ap * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
+    nearest = ap - t[..., None] * ab
+    distance: FloatArray = np.sqrt((nearest**2).sum(-1)).min(axis=1)
+    return distance
