@@ -74,7 +74,10 @@ class PlacementParams(_Frozen):
     closure_tolerance: float = Field(
         0.05, gt=0, description="largest gap left in the loop after refinement, m"
     )
-    top_k: int = Field(5, ge=1, description="runner-up placements kept for diagnostics")
+    top_k: int = Field(3, ge=1, description="best placements kept (runners-up in diagnostics)")
+    max_search_nodes: int = Field(
+        200_000, ge=1, description="search nodes before the best found so far is returned"
+    )
 
 
 class PipelineParams(_Frozen):

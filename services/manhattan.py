@@ -20,6 +20,7 @@ from services.types import FloatArray, ManhattanFrame
 __all__ = ["OrientedCloud", "estimate_manhattan_frame", "thin_with_normals"]
 
 _NORMAL_RADIUS = 3.0  # neighbourhood radius for normals, in voxel sizes
+_SHARPEN_POINTS = 12_000  # points used by the fine tilt and yaw search
 _MIN_CEILING_CLEARANCE = 1.8  # m; a horizontal surface lower than this over the floor is furniture
 
 
@@ -80,6 +81,34 @@ def _estimate_up(normals: FloatArray, max_tilt_deg: float) -> FloatArray:
     return unit
 
 
+def _refine_up_on_floor(cloud: OrientedCloud, up: FloatArray) -> FloatArray:
+    """Up as the normal of a least-squares plane through the floor, when enough is seen.
+
+    Per-point normals are noisy; a plane through thousands of floor points is not. The
+    band around the floor narrows as the plane fit improves (a tilted first guess would
+    cut a wide floor off at its far side).
+    """
+    heights = cloud.points @ up
+    flat = np.abs(cloud.normals @ up) > np.cos(np.radians(10.0))
+    if flat.sum() < 200:
+        return up
+    floor, _ = _horizontal_levels(heights[flat], float(np.percentile(heights, 1.0)))
+    normal, level = up, floor
+    for band in (0.12, 0.05, 0.03):
+        near = flat & (np.abs(cloud.points @ normal - level) < band)
+        on_floor = cloud.points[near]
+        if len(on_floor) < 1000 or np.linalg.eigvalsh(np.cov(on_floor.T))[1] < 0.5:
+            return up  # too little floor, or a strip: a plane fit would not fix the tilt
+        centre = on_floor.mean(axis=0)
+        _, _, vt = np.linalg.svd(on_floor - centre, full_matrices=False)
+        normal = vt[2] if vt[2] @ up > 0 else -vt[2]
+        level = float(centre @ normal)
+    if np.degrees(np.arccos(np.clip(normal @ up, -1.0, 1.0))) > 5.0:
+        return up  # the plane is not the floor the normals voted for
+    refined: FloatArray = normal
+    return refined
+
+
 def _minimal_tilt_rotation(up: FloatArray) -> FloatArray:
     """The smallest rotation taking ``up`` to +z (Rodrigues)."""
     z = np.array([0.0, 0.0, 1.0])
@@ -110,15 +139,107 @@ def _estimate_yaw(levelled_normals: FloatArray) -> tuple[float, float]:
     kernel = np.exp(-0.5 * (np.arange(-6, 7) / 2.0) ** 2)
     smooth = np.convolve(np.concatenate([hist[-6:], hist, hist[:6]]), kernel, mode="valid")
     peak = (edges[int(np.argmax(smooth))] + np.pi / bins) % (2 * np.pi)
-    near = np.abs(np.angle(np.exp(1j * (quad - peak)))) < np.radians(20.0)
-    mean = float(np.angle(np.exp(1j * quad[near]).mean()))
-    yaw = mean / 4.0
+    support = 0.0
+    # Narrowing windows: clutter at other angles stops pulling the mean.
+    for window_deg in (20.0, 8.0, 4.0):
+        near = np.abs(np.angle(np.exp(1j * (quad - peak)))) < np.radians(window_deg * 4.0)
+        if near.sum() < 10:
+            break
+        peak = float(np.angle(np.exp(1j * quad[near]).mean()))
+        support = support or float(near.mean())
+    yaw = peak / 4.0
     yaw = (yaw + np.pi / 4) % (np.pi / 2) - np.pi / 4
-    return yaw, float(near.mean())
+    return yaw, support
+
+
+def _sharpness(values: FloatArray, bin_size: float = 0.02) -> float:
+    """Sum of squared histogram counts: large when the values pile up on few levels."""
+    if len(values) == 0:
+        return 0.0
+    idx = np.floor(values / bin_size).astype(np.int64)
+    return float(np.sum(np.bincount(idx - idx.min()).astype(np.float64) ** 2))
+
+
+def _sharpen_tilt(aligned: FloatArray, normals: FloatArray) -> FloatArray:
+    """Small correction of the up axis that makes floor, ceiling and walls thinnest.
+
+    A tilt about x smears horizontal surfaces along z as y grows and walls of constant y
+    as z grows (likewise about y); both sharpen at the true up axis, and the lever is the
+    whole extent of the scan rather than a normal's 15 cm neighbourhood.
+    Returns a (3, 3) rotation to apply on the left of the current one.
+    """
+    pts = _subsample(aligned - aligned.mean(axis=0), _SHARPEN_POINTS)
+    nrm = _subsample(normals, _SHARPEN_POINTS)
+    flat = pts[np.abs(nrm[:, 2]) > np.cos(np.radians(10.0))]
+    wall_x = pts[np.abs(nrm[:, 0]) > np.cos(np.radians(15.0))]
+    wall_y = pts[np.abs(nrm[:, 1]) > np.cos(np.radians(15.0))]
+    if len(flat) + len(wall_x) + len(wall_y) < 100:
+        return np.eye(3)
+
+    def score(a: float, b: float) -> float:
+        rot = _small_rotation(a, b)
+        return _sharpness(flat @ rot[2]) + _sharpness(wall_x @ rot[0]) + _sharpness(wall_y @ rot[1])
+
+    alpha = beta = 0.0
+    # Coarse to fine: 0.1 degree steps over +-1 degree, then 0.01 over +-0.1.
+    for steps in (
+        np.radians(np.arange(-1.0, 1.0001, 0.1)),
+        np.radians(np.arange(-0.1, 0.1001, 0.01)),
+    ):
+        for _ in range(2):
+            alpha = float(max(alpha + steps, key=lambda a: score(a, beta)))
+            beta = float(max(beta + steps, key=lambda b: score(alpha, b)))
+    return _small_rotation(alpha, beta)
+
+
+def _subsample(values: FloatArray, limit: int) -> FloatArray:
+    """Every k-th row so at most about ``limit`` rows remain (deterministic)."""
+    stride = max(1, len(values) // limit)
+    sub: FloatArray = values[::stride]
+    return sub
+
+
+def _small_rotation(alpha: float, beta: float) -> FloatArray:
+    """Rotation about x by alpha, then about y by beta."""
+    ca, sa, cb, sb = np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta)
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, ca, -sa], [0.0, sa, ca]])
+    ry = np.array([[cb, 0.0, sb], [0.0, 1.0, 0.0], [-sb, 0.0, cb]])
+    out: FloatArray = ry @ rx
+    return out
+
+
+def _sharpen_yaw(
+    levelled_points: FloatArray, levelled_normals: FloatArray, yaw: float, span_deg: float = 1.5
+) -> float:
+    """Fine yaw: the angle at which wall points pile up in the sharpest x and y histograms.
+
+    Walls project to thin lines only when the axes are exactly right, so the sum of squared
+    histogram counts peaks there; it uses every wall point, not just their noisy normals.
+    """
+    walls = levelled_points[np.abs(levelled_normals[:, 2]) < np.sin(np.radians(15.0))][:, :2]
+    if len(walls) < 50:
+        return yaw
+    walls = _subsample(walls - walls.mean(axis=0), _SHARPEN_POINTS)
+
+    def score(angle: float) -> float:
+        c, s = np.cos(angle), np.sin(angle)
+        return _sharpness(walls @ np.array([c, s])) + _sharpness(walls @ np.array([-s, c]))
+
+    best = yaw
+    for step in (0.25, 0.025):
+        span = span_deg if step > 0.1 else 0.25
+        candidates = best + np.radians(np.arange(-span, span + 1e-9, step))
+        best = float(max(candidates, key=score))
+    return best
 
 
 def _horizontal_levels(heights: FloatArray, floor_guess: float) -> tuple[float, float | None]:
-    """Floor and ceiling heights from the heights of horizontal-surface points."""
+    """Floor and ceiling heights from the heights of horizontal-surface points.
+
+    The floor is the lowest strong peak of the height histogram, the ceiling the highest
+    one well above it. Each is taken at the peak itself, not where the histogram first
+    rises: with 2 cm noise the first strong bin lies a few centimetres low.
+    """
     if len(heights) < 10:
         return floor_guess, None
     bin_size = 0.02
@@ -127,11 +248,20 @@ def _horizontal_levels(heights: FloatArray, floor_guess: float) -> tuple[float, 
     hist, edges = np.histogram(heights, bins=n_bins, range=(lo, lo + n_bins * bin_size))
     smooth = np.convolve(hist, np.ones(3), mode="same")
     strong = np.flatnonzero(smooth >= 0.15 * smooth.max())
-    floor = float(edges[strong[0]] + bin_size / 2)
-    floor = _refine_level(heights, floor)
+    floor_bin = _climb(smooth, int(strong[0]), +1)
+    floor = _refine_level(heights, float(edges[floor_bin] + bin_size / 2))
     high = strong[edges[strong] > floor + _MIN_CEILING_CLEARANCE]
-    ceiling = _refine_level(heights, float(edges[high[-1]] + bin_size / 2)) if len(high) else None
-    return floor, ceiling
+    if not len(high):
+        return floor, None
+    ceiling_bin = _climb(smooth, int(high[-1]), -1)
+    return floor, _refine_level(heights, float(edges[ceiling_bin] + bin_size / 2))
+
+
+def _climb(values: FloatArray, index: int, step: int) -> int:
+    """Walk from ``index`` in direction ``step`` while the values keep rising."""
+    while 0 <= index + step < len(values) and values[index + step] >= values[index]:
+        index += step
+    return index
 
 
 def _refine_level(heights: FloatArray, level: float) -> float:
@@ -159,12 +289,18 @@ def estimate_manhattan_frame(
     if len(cloud.points) == 0:
         return ManhattanFrame(rotation=np.eye(3), floor_z=0.0, ceiling_z=None)
     up = _estimate_up(cloud.normals, params.max_tilt_deg)
+    up = _refine_up_on_floor(cloud, up)
     tilt = _minimal_tilt_rotation(up)
     levelled = cloud.normals @ tilt.T
     yaw, support = _estimate_yaw(levelled)
+    yaw = _sharpen_yaw(cloud.points @ tilt.T, levelled, yaw)
     c, s = np.cos(-yaw), np.sin(-yaw)
     spin = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     rotation = spin @ tilt
+    rotation = _sharpen_tilt(cloud.points @ rotation.T, cloud.normals @ rotation.T) @ rotation
+    yaw_fix = _sharpen_yaw(cloud.points @ rotation.T, cloud.normals @ rotation.T, 0.0, 0.3)
+    c, s = np.cos(-yaw_fix), np.sin(-yaw_fix)
+    rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ rotation
     aligned_z = cloud.points @ rotation[2]
     normal_z = np.abs(cloud.normals @ up)
     flat = aligned_z[normal_z > np.cos(np.radians(10.0))]

@@ -19,6 +19,7 @@ import heapq
 import itertools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -27,11 +28,18 @@ from scipy.special import erf
 from schemas.params import PlacementParams
 from services.types import FloatArray, LocalLayout
 
-__all__ = ["Piece", "Placement", "PlacementCandidate", "make_piece", "place_pieces", "rot90"]
+__all__ = [
+    "Piece",
+    "Placement",
+    "PlacementCandidate",
+    "evaluate_placement",
+    "make_piece",
+    "place_pieces",
+    "rot90",
+]
 
 _TURNS = (0, 1, -1)  # continue, turn left (convex corner), turn right (concave corner)
 _CROSS_EPS = 0.05  # m, walls may touch within this distance but not cross
-_MAX_NODES = 400_000  # search nodes before giving up on proving optimality
 _HULL_TOLERANCE = 0.35  # m, hull vertices closer than this to their chord are dropped
 
 
@@ -66,20 +74,29 @@ class Piece:
     target_boundary: FloatArray
     footprint: FloatArray
 
-    @property
+    @cached_property
     def turning(self) -> int:
         """Signed quarter turns inside the chain (left +1, right -1)."""
         steps = np.diff(np.asarray(self.directions)) % 4
         return int(np.sum(steps == 1) - np.sum(steps == 3))
 
-    @property
+    @cached_property
     def corners(self) -> int:
         return len(self.keypoints) - 2
 
-    @property
+    @cached_property
     def span_l1(self) -> float:
         """Manhattan length of source->target; unchanged by quarter-turn rotations."""
         return float(np.abs(self.keypoints[-1]).sum())
+
+    @cached_property
+    def rotated(self) -> tuple[tuple[FloatArray, FloatArray], ...]:
+        """Per quarter turn r: the rotated keypoints and their walls (see ``_walls``)."""
+        out = []
+        for r in range(4):
+            pts = self.keypoints @ rot90(r).T
+            out.append((pts, _walls(pts)))
+        return tuple(out)
 
 
 def make_piece(fragment_id: str, layout: LocalLayout) -> Piece:
@@ -180,6 +197,7 @@ class _Search:
     successor: dict[int, int]
     predecessor: dict[int, int]
     require_closed: bool
+    cheapest_entry: dict[int, float] = field(default_factory=dict)
     top: list[tuple[float, int, PlacementCandidate]] = field(default_factory=list)
     nodes: int = 0
     counter: itertools.count[int] = field(default_factory=itertools.count)
@@ -209,6 +227,17 @@ def _walls(points: FloatArray) -> FloatArray:
     lo = np.where(along_x, np.minimum(a[:, 0], b[:, 0]), np.minimum(a[:, 1], b[:, 1]))
     hi = np.where(along_x, np.maximum(a[:, 0], b[:, 0]), np.maximum(a[:, 1], b[:, 1]))
     return np.column_stack([np.where(along_x, 0.0, 1.0), offset, lo, hi])
+
+
+def _shift_walls(walls: FloatArray, shift: FloatArray) -> FloatArray:
+    """Walls (axis, offset, lo, hi) translated by ``shift`` (2,)."""
+    along_x = walls[:, 0] == 0.0
+    out = walls.copy()
+    out[:, 1] += np.where(along_x, shift[1], shift[0])
+    run = np.where(along_x, shift[0], shift[1])
+    out[:, 2] += run
+    out[:, 3] += run
+    return out
 
 
 def _crosses(new: FloatArray, placed: FloatArray) -> bool:
@@ -256,8 +285,9 @@ class _State:
 def _extend(search: _Search, state: _State, j: int, turn: int) -> _State | None:
     piece = search.pieces[j]
     rotation = (state.heading + turn - piece.directions[0]) % 4
-    pts = piece.keypoints @ rot90(rotation).T + state.end
-    walls = _walls(pts)
+    local_pts, local_walls = piece.rotated[rotation]
+    pts = local_pts + state.end
+    walls = _shift_walls(local_walls, state.end)
     if _crosses(walls, state.walls):
         return None
     return _State(
@@ -281,25 +311,41 @@ def _close(search: _Search, state: _State) -> None:
     if search.require_closed and not closed_ok:
         return
     w_l, w_c, w_b = search.weights()
-    complexity = state.corners + (turn not in (0, 2)) + _hull_edges(state.vertices)
+    corners = state.corners + (turn not in (0, 2))
     closure = float(np.abs(state.end).sum())
     boundary = state.boundary + (search.mismatch[(state.order[-1], 0, turn)] if turn != 2 else 1.0)
+    # The hull has at least 4 edges: skip computing it when even that cannot win.
+    if w_l * (corners + 4) + w_c * closure + w_b * boundary >= search.bound():
+        return
+    complexity = corners + _hull_edges(state.vertices)
     energy = w_l * complexity + w_c * closure + w_b * boundary
     ids = tuple(search.pieces[i].id for i in state.order)
     search.record(PlacementCandidate(energy, ids, state.rotations, complexity, closure, boundary))
 
 
 def _lower_bound(search: _Search, state: _State, remaining: Sequence[int]) -> float:
+    """No completion of ``state`` has a lower energy than this.
+
+    Corners: those placed, those inside the pieces left, and one per quarter turn the
+    junctions still owe the loop; hull edges: at least 4; closure: the gap less what the
+    pieces left can span; boundary: each piece left (and the loop's start) is entered at
+    the cheapest junction it has.
+    """
     w_l, w_c, w_b = search.weights()
-    span = sum(search.pieces[i].span_l1 for i in remaining)
+    pieces = search.pieces
+    span = sum(pieces[i].span_l1 for i in remaining)
     closure = max(0.0, float(np.abs(state.end).sum()) - span)
-    corners = state.corners + sum(search.pieces[i].corners for i in remaining)
-    return w_l * (corners + 4) + w_c * closure + w_b * state.boundary
+    owed = abs(4 - state.turning - sum(pieces[i].turning for i in remaining))
+    if not search.require_closed:
+        owed = 0
+    corners = state.corners + sum(pieces[i].corners for i in remaining) + owed
+    boundary = state.boundary + sum(search.cheapest_entry[i] for i in (*remaining, 0))
+    return w_l * (corners + 4) + w_c * closure + w_b * boundary
 
 
 def _dfs(search: _Search, state: _State, remaining: tuple[int, ...]) -> None:
     search.nodes += 1
-    if search.nodes > _MAX_NODES:
+    if search.nodes > search.params.max_search_nodes:
         return
     if not remaining:
         _close(search, state)
@@ -322,6 +368,43 @@ def _dfs(search: _Search, state: _State, remaining: tuple[int, ...]) -> None:
         child = _extend(search, state, j, turn)
         if child is not None:
             _dfs(search, child, tuple(i for i in remaining if i != j))
+
+
+def _all_mismatches(
+    pieces: Sequence[Piece], params: PlacementParams
+) -> dict[tuple[int, int, int], float]:
+    """Boundary mismatch of every ordered pair and junction turn."""
+    n = len(pieces)
+    return {
+        (a, b, t): _boundary_mismatch(pieces[a], pieces[b], t, params)
+        for a in range(n)
+        for b in range(n)
+        for t in _TURNS
+        if a != b or n == 1
+    }
+
+
+def _root(first: Piece, params: PlacementParams) -> _State:
+    """The search's root: the first piece fixed at the origin with rotation 0."""
+    return _State(
+        order=(0,),
+        rotations=(0,),
+        end=first.keypoints[-1].copy(),
+        heading=first.directions[-1],
+        turning=first.turning,
+        corners=first.corners,
+        boundary=0.0,
+        walls=_trim_start(_walls(first.keypoints), first.keypoints[0], params.closure_tolerance),
+        vertices=first.keypoints.copy(),
+    )
+
+
+def _cheapest_entries(mismatch: Mapping[tuple[int, int, int], float], n: int) -> dict[int, float]:
+    """Lowest boundary mismatch with which each piece can follow another."""
+    best = dict.fromkeys(range(n), 1.0)
+    for (_, b, _), value in mismatch.items():
+        best[b] = min(best[b], value)
+    return best
 
 
 def _constraint_maps(
@@ -359,29 +442,13 @@ def place_pieces(
     if not pieces:
         return None
     n = len(pieces)
-    mismatch = {
-        (a, b, t): _boundary_mismatch(pieces[a], pieces[b], t, params)
-        for a in range(n)
-        for b in range(n)
-        for t in _TURNS
-        if a != b or n == 1
-    }
+    mismatch = _all_mismatches(pieces, params)
     successor, predecessor = _constraint_maps([p.id for p in pieces], order_hint, neighbours)
-    first = pieces[0]
-    root = _State(
-        order=(0,),
-        rotations=(0,),
-        end=first.keypoints[-1].copy(),
-        heading=first.directions[-1],
-        turning=first.turning,
-        corners=first.corners,
-        boundary=0.0,
-        walls=_trim_start(_walls(first.keypoints), first.keypoints[0], params.closure_tolerance),
-        vertices=first.keypoints.copy(),
-    )
+    root = _root(pieces[0], params)
     nodes = 0
     for require_closed in (True, False):
         search = _Search(list(pieces), params, mismatch, successor, predecessor, require_closed)
+        search.cheapest_entry = _cheapest_entries(mismatch, n)
         _dfs(search, root, tuple(range(1, n)))
         nodes += search.nodes
         if search.top:
@@ -395,7 +462,7 @@ def place_pieces(
         translations=_translations(pieces, best),
         alternatives=tuple(ranked[1:]),
         nodes_searched=nodes,
-        exhaustive=search.nodes <= _MAX_NODES,
+        exhaustive=search.nodes <= params.max_search_nodes,
         closed=require_closed,
     )
 
@@ -409,3 +476,31 @@ def _translations(pieces: Sequence[Piece], cand: PlacementCandidate) -> FloatArr
         out.append(end.copy())
         end = end + by_id[fid].keypoints[-1] @ rot90(rotation).T
     return np.asarray(out)
+
+
+def evaluate_placement(
+    pieces: Sequence[Piece],
+    order: Sequence[str],
+    rotations: Sequence[int],
+    params: PlacementParams = PlacementParams(),
+) -> PlacementCandidate | None:
+    """Energy of one given placement, or None when it is not a valid closed loop.
+
+    The same energy the search minimises; used to check the search against brute force
+    and to score a placement a user proposes.
+    """
+    by_id = {p.id: i for i, p in enumerate(pieces)}
+    if order[0] != pieces[0].id or rotations[0] != 0 or sorted(order) != sorted(by_id):
+        return None
+    params = params.model_copy(update={"top_k": 1})
+    search = _Search(list(pieces), params, _all_mismatches(pieces, params), {}, {}, True)
+    state = _root(pieces[0], params)
+    for fid, rotation in zip(order[1:], rotations[1:], strict=True):
+        j = by_id[fid]
+        turn = {0: 0, 1: 1, 3: -1}.get((rotation + pieces[j].directions[0] - state.heading) % 4)
+        child = None if turn is None else _extend(search, state, j, turn)
+        if child is None:
+            return None
+        state = child
+    _close(search, state)
+    return search.top[0][2] if search.top else None

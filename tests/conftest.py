@@ -1,0 +1,65 @@
+"""Shared fixtures: small synthetic scenes (cached per session) and chain builders."""
+
+from __future__ import annotations
+
+import dataclasses
+from functools import cache
+
+import numpy as np
+import pytest
+
+from services.placement import Piece, _direction_index, rot90
+from services.synthetic import SceneSpec, SyntheticScene, generate_scene
+
+__all__ = ["chains_from_polygon", "small_scene"]
+
+
+@cache
+def small_scene(preset: str = "easy", seed: int = 0, points: int = 30_000) -> SyntheticScene:
+    """A generated scene with fewer points per fragment, cached across tests."""
+    spec = getattr(SceneSpec, preset)()
+    spec = dataclasses.replace(spec, points_per_fragment=(points, points + 10_000))
+    return generate_scene(spec, seed)
+
+
+def _perimeter(polygon: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    closed = np.vstack([polygon, polygon[:1]])
+    lengths = np.linalg.norm(np.diff(closed, axis=0), axis=1)
+    return closed, np.concatenate([[0.0], np.cumsum(lengths)])
+
+
+def _point_at(polygon: np.ndarray, arc: float) -> np.ndarray:
+    closed, cum = _perimeter(polygon)
+    arc = arc % cum[-1]
+    i = int(np.searchsorted(cum, arc, side="right") - 1)
+    t = (arc - cum[i]) / (cum[i + 1] - cum[i])
+    return closed[i] + t * (closed[i + 1] - closed[i])
+
+
+def chains_from_polygon(
+    polygon: np.ndarray, cuts: list[float], rotations: list[int]
+) -> list[Piece]:
+    """Cut a CCW polygon's boundary at arc positions into wall chains, each turned by a
+    quarter-turn count and moved so its source is at the origin (as a fragment would be)."""
+    _, cum = _perimeter(polygon)
+    total = cum[-1]
+    pieces = []
+    for k, start in enumerate(cuts):
+        end = cuts[(k + 1) % len(cuts)] + (total if k == len(cuts) - 1 else 0.0)
+        corners = [
+            polygon[i % len(polygon)]
+            for i, c in enumerate(np.concatenate([cum[:-1], cum[:-1] + total]))
+            if start < c < end
+        ]
+        kp = np.vstack([_point_at(polygon, start), *corners, _point_at(polygon, end)])
+        kp = (kp - kp[0]) @ rot90(rotations[k]).T
+        dirs = tuple(_direction_index(d) for d in np.diff(kp, axis=0))
+        empty3, empty2 = np.zeros((0, 3)), np.zeros((0, 2))
+        pieces.append(Piece(f"p{k}", kp, dirs, empty3, empty3, empty2))
+    return pieces
+
+
+@pytest.fixture
+def l_room() -> np.ndarray:
+    """An L-shaped room, counter-clockwise."""
+    return np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], dtype=np.float64)

@@ -1,0 +1,54 @@
+"""Manhattan frame: up axis, wall yaw, floor and ceiling from tilted, cluttered fragments."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from schemas.params import ManhattanParams
+from services.manhattan import estimate_manhattan_frame, thin_with_normals
+from tests.conftest import small_scene
+
+pytestmark = pytest.mark.timeout(60)
+
+
+def _rotation_error_deg(frame_rotation: np.ndarray, pose: np.ndarray) -> tuple[float, float]:
+    """Tilt error of the estimated up and yaw error modulo 90 degrees."""
+    up_local_true = pose[:3, :3].T @ np.array([0.0, 0.0, 1.0])
+    up_est = frame_rotation[2]
+    tilt = np.degrees(np.arccos(np.clip(up_est @ up_local_true, -1, 1)))
+    # Wall direction x of the aligned frame, mapped to the world, must be axis-parallel.
+    x_world = pose[:3, :3] @ frame_rotation[0]
+    yaw = np.degrees(np.arctan2(x_world[1], x_world[0])) % 90.0
+    return float(tilt), float(min(yaw, 90.0 - yaw))
+
+
+@pytest.mark.parametrize(("preset", "seed"), [("easy", 0), ("paper", 1), ("hard", 2)])
+def test_frame_recovers_up_and_yaw(preset, seed):
+    scene = small_scene(preset, seed)
+    for fragment in scene.fragments:
+        cloud = thin_with_normals(fragment.points, ManhattanParams())
+        frame = estimate_manhattan_frame(cloud)
+        tilt, yaw = _rotation_error_deg(frame.rotation, fragment.pose)
+        assert tilt < 0.5, fragment.id
+        assert yaw < 0.5, fragment.id
+        assert np.allclose(frame.rotation @ frame.rotation.T, np.eye(3), atol=1e-9)
+        assert np.linalg.det(frame.rotation) == pytest.approx(1.0)
+        # Floor of the aligned frame equals the world floor (z = 0) mapped into it.
+        floor_true = (frame.rotation @ np.linalg.inv(fragment.pose)[:3, 3])[2]
+        assert frame.floor_z == pytest.approx(floor_true, abs=0.03)
+
+
+def test_floor_only_fragment_keeps_a_valid_frame():
+    rng = np.random.default_rng(0)
+    floor = np.column_stack([rng.uniform(0, 4, 5000), rng.uniform(0, 3, 5000), np.zeros(5000)])
+    floor += rng.normal(0, 0.01, floor.shape)
+    frame = estimate_manhattan_frame(thin_with_normals(floor, ManhattanParams()))
+    assert frame.rotation[2] @ np.array([0.0, 0.0, 1.0]) > np.cos(np.radians(1.0))
+    assert frame.ceiling_z is None
+    assert frame.floor_z == pytest.approx(0.0, abs=0.03)
+
+
+def test_empty_cloud_gives_identity():
+    frame = estimate_manhattan_frame(thin_with_normals(np.zeros((0, 3)), ManhattanParams()))
+    assert np.array_equal(frame.rotation, np.eye(3))

@@ -1,0 +1,118 @@
+"""Global placement: the search against brute force, pruning rules, constraints, ablation."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from schemas.params import PlacementParams
+from services.placement import evaluate_placement, place_pieces
+from tests.conftest import chains_from_polygon
+
+pytestmark = pytest.mark.timeout(120)
+
+
+def _brute_force(pieces, params):
+    best = None
+    rest = [p.id for p in pieces[1:]]
+    for perm in itertools.permutations(rest):
+        for rots in itertools.product(range(4), repeat=len(rest)):
+            cand = evaluate_placement(pieces, (pieces[0].id, *perm), (0, *rots), params)
+            if cand is not None and (best is None or cand.energy < best.energy - 1e-9):
+                best = cand
+    return best
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_search_finds_the_brute_force_minimum(l_room, seed):
+    rng = np.random.default_rng(seed)
+    n = 4 if seed % 2 else 3
+    cuts = sorted(rng.uniform(0, 28, size=n).tolist())
+    pieces = chains_from_polygon(l_room, cuts, rng.integers(0, 4, size=n).tolist())
+    params = PlacementParams(use_boundary=False)
+    placement = place_pieces(pieces, params)
+    brute = _brute_force(pieces, params)
+    assert placement is not None and brute is not None
+    assert placement.exhaustive
+    assert placement.best.energy == pytest.approx(brute.energy, abs=1e-9)
+
+
+def test_recovers_order_and_rotations_of_a_cut_room(l_room):
+    # Cuts in the middle of walls of different lengths: one placement closes the loop.
+    cuts = [1.0, 9.5, 12.5, 20.0]
+    pieces = chains_from_polygon(l_room, cuts, [0, 1, 2, 3])
+    shuffled = [pieces[0], pieces[3], pieces[1], pieces[2]]
+    placement = place_pieces(shuffled, PlacementParams(use_boundary=False))
+    assert placement is not None and placement.closed
+    assert placement.best.order == ("p0", "p1", "p2", "p3")
+    assert placement.best.closure == pytest.approx(0.0, abs=1e-9)
+    # The placement undoes each piece's turn relative to the first.
+    assert list(placement.best.rotations) == [0, 3, 2, 1]
+
+
+def test_the_true_placement_is_optimal_even_when_tied(l_room):
+    cuts = [1.0, 9.5, 14.0, 20.0, 25.5]
+    pieces = chains_from_polygon(l_room, cuts, [0, 1, 2, 3, 1])
+    params = PlacementParams(use_boundary=False)
+    truth = evaluate_placement(pieces, ["p0", "p1", "p2", "p3", "p4"], [0, 3, 2, 1, 3], params)
+    placement = place_pieces(pieces, params)
+    assert truth is not None and placement is not None
+    assert placement.best.energy == pytest.approx(truth.energy)
+
+
+def test_runner_up_alternatives_are_reported_in_energy_order(l_room):
+    pieces = chains_from_polygon(l_room, [1.0, 9.5, 14.0, 20.0], [0, 0, 0, 0])
+    placement = place_pieces(pieces, PlacementParams(top_k=3))
+    assert placement is not None
+    energies = [placement.best.energy] + [a.energy for a in placement.alternatives]
+    assert energies == sorted(energies)
+    assert len(placement.alternatives) >= 1
+
+
+def test_known_neighbours_constrain_the_order(l_room):
+    pieces = chains_from_polygon(l_room, [1.0, 9.5, 14.0, 20.0], [0, 0, 0, 0])
+    free = place_pieces(pieces)
+    forced = place_pieces(pieces, neighbours=[("p0", "p2")])
+    assert free is not None and forced is not None
+    assert free.best.order[1] == "p1"
+    if forced.best is not None:
+        assert forced.best.order[1] == "p2"
+
+
+def test_order_hint_is_followed(l_room):
+    pieces = chains_from_polygon(l_room, [1.0, 9.5, 14.0, 20.0], [0, 2, 1, 3])
+    placement = place_pieces(pieces, order_hint=["p0", "p1", "p2", "p3"])
+    assert placement is not None
+    assert placement.best.order == ("p0", "p1", "p2", "p3")
+
+
+def test_single_partial_piece_is_placed_open():
+    square = np.array([[0, 0], [4, 0], [4, 4], [0, 4]], dtype=np.float64)
+    piece = chains_from_polygon(square, [1.0, 9.0], [0, 0])[0]
+    placement = place_pieces([piece])
+    assert placement is not None
+    assert not placement.closed
+
+
+@pytest.mark.parametrize("term", ["use_complexity", "use_closure", "use_boundary"])
+def test_each_energy_term_can_be_switched_off(l_room, term):
+    pieces = chains_from_polygon(l_room, [1.0, 9.5, 14.0, 20.0], [0, 1, 2, 3])
+    placement = place_pieces(pieces, PlacementParams(**{term: False}))
+    assert placement is not None
+    best = placement.best
+    full = best.complexity + best.closure + best.boundary + 10.0 * best.free_space
+    dropped = {
+        "use_complexity": best.complexity,
+        "use_closure": best.closure,
+        "use_boundary": best.boundary,
+    }[term]
+    assert best.energy == pytest.approx(full - dropped)
+
+
+def test_invalid_placements_are_rejected(l_room):
+    pieces = chains_from_polygon(l_room, [1.0, 9.5, 14.0, 20.0], [0, 0, 0, 0])
+    assert evaluate_placement(pieces, ["p1", "p0", "p2", "p3"], [0, 0, 0, 0]) is None
+    # Folding a piece back onto the previous wall (a 180 degree junction) is not a loop.
+    assert evaluate_placement(pieces, ["p0", "p1", "p2", "p3"], [0, 2, 0, 0]) is None

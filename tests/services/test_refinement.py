@@ -1,0 +1,53 @@
+"""Pose refinement QP: junction constraints hold, failures fall back and say so."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from services.placement import place_pieces, rot90
+from services.refinement import refine_translations
+from tests.conftest import chains_from_polygon
+
+pytestmark = pytest.mark.timeout(60)
+
+
+def _sites(pieces, rotations, translations):
+    return [
+        p.keypoints @ rot90(r).T + t
+        for p, r, t in zip(pieces, rotations, translations, strict=True)
+    ]
+
+
+def test_parallel_junctions_become_collinear(l_room):
+    pieces = chains_from_polygon(l_room, [1.0, 9.5, 12.5, 20.0], [0, 1, 2, 3])
+    placement = place_pieces(pieces)
+    assert placement is not None
+    ordered = {p.id: p for p in pieces}
+    ordered_pieces = [ordered[i] for i in placement.best.order]
+    # Disturb the placement: pieces drift off their walls.
+    noisy = placement.translations + np.array([[0, 0], [0.05, -0.08], [0.1, 0.04], [-0.06, 0.07]])
+    refined = refine_translations(ordered_pieces, placement.best.rotations, noisy)
+    assert refined.status == "solved"
+    assert refined.violation_before > 0.01
+    assert refined.violation_after < 1e-3
+    sites = _sites(ordered_pieces, placement.best.rotations, refined.translations)
+    for i in range(len(sites)):
+        q, p = sites[i][-1], sites[(i + 1) % len(sites)][0]
+        d_in, d_out = sites[i][-1] - sites[i][-2], sites[(i + 1) % len(sites)][1] - p
+        if abs(d_in @ d_out) > 0:  # parallel junction: same wall line
+            axis = 1 if abs(d_in[0]) > abs(d_in[1]) else 0
+            assert q[axis] == pytest.approx(p[axis], abs=1e-3)
+    assert np.allclose(refined.translations[0], placement.translations[0])
+
+
+def test_conflicting_junctions_fall_back_to_the_placement_and_say_so():
+    # A loop of two collinear straight walls: at each junction the next wall must reach past
+    # the previous one's far end (no overrun); both together are impossible, so OSQP
+    # reports the problem infeasible.
+    square = np.array([[0, 0], [6, 0], [6, 6], [0, 6]], dtype=np.float64)
+    bottom = chains_from_polygon(square, [1.0, 5.0], [0, 0])[0]
+    translations = np.array([[0.0, 0.0], [4.0, 1.0]])
+    refined = refine_translations([bottom, bottom], [0, 0], translations)
+    assert refined.status.startswith("fallback")
+    assert np.array_equal(refined.translations, translations)
