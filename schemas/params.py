@@ -6,6 +6,8 @@ overridden per run. Deployment settings live in :mod:`schemas.settings`.
 
 from __future__ import annotations
 
+from typing import Literal
+
 from pydantic import BaseModel, ConfigDict, Field
 
 __all__ = [
@@ -14,6 +16,7 @@ __all__ = [
     "ParserLimits",
     "PipelineParams",
     "PlacementParams",
+    "RegistrationParams",
 ]
 
 
@@ -52,6 +55,11 @@ class LayoutParams(_Frozen):
     complexity_penalty: float = Field(0.1, ge=0, description="lambda in the edge weight")
     boundary_band: float = Field(0.10, gt=0, description="half-width of the boundary band, m")
     min_wall_cells: int = Field(3, ge=1, description="shortest candidate wall segment, cells")
+    source_target: Literal["evidence", "spanning_forest"] = Field(
+        "spanning_forest",
+        description="how the chain's ends are chosen: the pair whose min-cost path covers the "
+        "most wall for its cost, or the paper's longest path in the ST-graph's spanning forest",
+    )
 
 
 class PlacementParams(_Frozen):
@@ -78,6 +86,27 @@ class PlacementParams(_Frozen):
     max_search_nodes: int = Field(
         200_000, ge=1, description="search nodes before the best found so far is returned"
     )
+
+
+class RegistrationParams(_Frozen):
+    """FPFH + RANSAC + ICP registration and pre-merge parameters (paper 3, Table 1)."""
+
+    voxel_size: float = Field(0.05, gt=0, description="downsampling voxel before features, m")
+    normal_radius_factor: float = Field(2.0, gt=0, description="normal radius / voxel")
+    feature_radius_factor: float = Field(5.0, gt=0, description="FPFH radius / voxel")
+    ransac_distance_factor: float = Field(1.5, gt=0, description="RANSAC inlier dist / voxel")
+    edge_length_ratio: float = Field(0.9, gt=0, lt=1, description="edge-length checker")
+    ransac_max_iterations: int = Field(100_000, ge=1)
+    ransac_confidence: float = Field(0.999, gt=0, lt=1)
+    mutual_filter: bool = True
+    icp_distance_factor: float = Field(1.5, gt=0, description="ICP / inlier distance / voxel")
+    icp_max_iterations: int = Field(50, ge=1)
+    merge_inlier_ratio: float = Field(0.6, ge=0, le=1, description="pre-merge threshold (paper)")
+    # thinning voxel of merged clouds, m; None: members' median point spacing (>= 1 mm)
+    merge_voxel_size: float | None = Field(None, gt=0)
+    # chain_baseline drops pairs at or below this inlier ratio (0: only failed registrations)
+    min_edge_inlier_ratio: float = Field(0.0, ge=0, le=1)
+    seed: int = Field(0, ge=0, description="Open3D random seed, set before every RANSAC run")
 
 
 class PipelineParams(_Frozen):

@@ -246,7 +246,7 @@ def _horizontal_levels(heights: FloatArray, floor_guess: float) -> tuple[float, 
     lo, hi = float(heights.min()), float(heights.max())
     n_bins = max(1, int(np.ceil((hi - lo) / bin_size)) + 1)
     hist, edges = np.histogram(heights, bins=n_bins, range=(lo, lo + n_bins * bin_size))
-    smooth = np.convolve(hist, np.ones(3), mode="same")
+    smooth = np.convolve(np.pad(hist, 1), np.ones(3), mode="valid")  # same length as hist
     strong = np.flatnonzero(smooth >= 0.15 * smooth.max())
     floor_bin = _climb(smooth, int(strong[0]), +1)
     floor = _refine_level(heights, float(edges[floor_bin] + bin_size / 2))

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components, dijkstra, minimum_spanning_tree
+from scipy.sparse.csgraph import dijkstra, minimum_spanning_tree
 
 from schemas.params import LayoutParams
 from services.types import FloatArray
@@ -21,7 +21,8 @@ from services.wall_lines import WallLine
 __all__ = ["WallChain", "find_wall_chain"]
 
 _CORNER_REACH = 2.0  # m, how far past a segment's end a deduced corner may lie
-_OCCLUSION_REACH = 3.0  # m, longest occluded stretch bridged between parallel walls
+_OCCLUSION_REACH = 3.0  # m, longest gap the ST-graph links across on one line
+_COST_METERS = 1.0  # meters of covered wall worth one unit of path cost
 _SNAP_CELLS = 2.0  # a segment end this close to a deduced corner is merged into it
 
 
@@ -77,41 +78,6 @@ def _add_corners(lines: list[WallLine], nodes: _Nodes) -> None:
                 nodes.add(corner, [(i, b.offset), (j, a.offset)])
 
 
-def _occluded_links(lines: list[WallLine], cell: float) -> list[WallLine]:
-    """Deduced walls joining misaligned parallel segments that face the same interior."""
-    deduced: list[WallLine] = []
-    for a in lines:
-        for b in lines:
-            if a is b or a.axis != b.axis or a.travel != b.travel or a.virtual or b.virtual:
-                continue
-            if abs(a.offset - b.offset) < 2 * cell:
-                continue
-            for end in a.segments[:, 1] if a.travel > 0 else a.segments[:, 0]:
-                for start in b.segments[:, 0] if a.travel > 0 else b.segments[:, 1]:
-                    ahead = (start - end) * a.travel
-                    if -2 * cell <= ahead <= _OCCLUSION_REACH:
-                        deduced.extend(_bridge(a, b, run) for run in (end, start))
-    return deduced
-
-
-def _bridge(a: WallLine, b: WallLine, run: float) -> WallLine:
-    """A fully evidenced wall at run coordinate ``run`` from line ``a`` over to line ``b``."""
-    lo, hi = sorted((a.offset, b.offset))
-    cells = max(1, round((hi - lo) / a.cell_size))
-    # The chain walks along a, then across to b: the bridge is travelled from a to b.
-    travel = 1 if b.offset > a.offset else -1
-    return WallLine(
-        axis=1 - a.axis,
-        offset=float(run),
-        travel=travel,
-        origin=lo,
-        cell_size=(hi - lo) / cells,
-        high=np.ones(cells, dtype=bool),
-        segments=np.array([[lo, hi]]),
-        virtual=True,
-    )
-
-
 def _build_nodes(lines: list[WallLine]) -> _Nodes:
     nodes = _Nodes(points=[], on_line={}, _index={})
     _add_corners(lines, nodes)
@@ -132,8 +98,11 @@ def _build_nodes(lines: list[WallLine]) -> _Nodes:
     return nodes
 
 
-def _edges(lines: list[WallLine], nodes: _Nodes, penalty: float) -> tuple[csr_matrix, csr_matrix]:
-    """Directed WE-graph weights and undirected ST-graph lengths.
+def _edges(
+    lines: list[WallLine], nodes: _Nodes, penalty: float
+) -> tuple[csr_matrix, csr_matrix, FloatArray]:
+    """Directed WE-graph weights, undirected ST-graph lengths, and per directed edge the
+    wall length (m) its high cells cover.
 
     The ST-graph joins only neighbouring nodes along a line (across gaps up to the
     occlusion reach), so its spanning forest follows the walls instead of jumping back.
@@ -141,6 +110,7 @@ def _edges(lines: list[WallLine], nodes: _Nodes, penalty: float) -> tuple[csr_ma
     n = len(nodes.points)
     we: dict[tuple[int, int], float] = {}
     st: dict[tuple[int, int], float] = {}
+    cover = np.zeros((n, n))
     for li, members in nodes.on_line.items():
         line = lines[li]
         ordered = sorted(members.items(), key=lambda kv: kv[1] * line.travel)
@@ -155,8 +125,10 @@ def _edges(lines: list[WallLine], nodes: _Nodes, penalty: float) -> tuple[csr_ma
                     continue
                 # Cells are counted whole, so H may exceed the fractional L by a rounding.
                 weight = max(length - high, 0.0) / high + penalty
-                we[(u, v)] = min(weight, we.get((u, v), np.inf))
-    return _sparse(we, n), _sparse(st, n)
+                if weight < we.get((u, v), np.inf):
+                    we[(u, v)] = weight
+                    cover[u, v] = min(high, length) * line.cell_size
+    return _sparse(we, n), _sparse(st, n), cover
 
 
 def _st_link(
@@ -182,33 +154,68 @@ def _sparse(weights: dict[tuple[int, int], float], n: int) -> csr_matrix:
     return csr_matrix((np.fromiter(weights.values(), float), (rows, cols)), shape=(n, n))
 
 
-def _tree_ends(st: csr_matrix) -> tuple[int, int] | None:
-    """Ends of the longest path in the minimal spanning forest of the ST-graph."""
+def _forest_ends(st: csr_matrix) -> tuple[int, int] | None:
+    """The paper's rule: ends of the longest path in the minimal spanning forest."""
     forest = minimum_spanning_tree(st)
     forest = forest + forest.T
-    n_comp, labels = connected_components(forest, directed=False)
     best: tuple[float, int, int] | None = None
-    for comp in range(n_comp):
-        members = np.flatnonzero(labels == comp)
-        if len(members) < 2:
-            continue
-        dist = dijkstra(forest, indices=int(members[0]))
-        u = int(members[np.argmax(dist[members])])
-        dist_u = dijkstra(forest, indices=u)
-        v = int(members[np.argmax(dist_u[members])])
-        if best is None or dist_u[v] > best[0]:
-            best = (float(dist_u[v]), u, v)
+    for start in np.flatnonzero(np.asarray((forest != 0).sum(axis=1)).ravel()):
+        dist = dijkstra(forest, indices=int(start))
+        far = int(np.argmax(np.where(np.isfinite(dist), dist, -1.0)))
+        if best is None or dist[far] > best[0]:
+            best = (float(dist[far]), int(start), far)
     return None if best is None else (best[1], best[2])
 
 
-def _path(we: csr_matrix, source: int, target: int) -> tuple[list[int], float] | None:
-    dist, pred = dijkstra(we, directed=True, indices=source, return_predecessors=True)
-    if not np.isfinite(dist[target]):
+def _forest_path(we: csr_matrix, st: csr_matrix) -> tuple[list[int], float] | None:
+    """Min-cost path between the spanning-forest ends, in whichever direction exists."""
+    ends = _forest_ends(st)
+    if ends is None:
         return None
+    found = []
+    for source, target in (ends, ends[::-1]):
+        dist, pred = dijkstra(we, directed=True, indices=source, return_predecessors=True)
+        if np.isfinite(dist[target]):
+            path = [target]
+            while path[-1] != source:
+                path.append(int(pred[path[-1]]))
+            found.append((path[::-1], float(dist[target])))
+    return min(found, key=lambda pc: pc[1]) if found else None
+
+
+def _best_path(we: csr_matrix, cover: FloatArray) -> tuple[list[int], float] | None:
+    """The directed min-cost path that explains the most wall.
+
+    Over every source and target: covered high-evidence length minus the path cost (one
+    cost unit = one meter). The paper takes the two ends of the longest path in a spanning
+    forest of the candidate keypoints; with clutter that forest shortcuts through spurious
+    corners, so here the evidence itself picks the ends.
+    """
+    n = we.shape[0]
+    if n < 2:
+        return None
+    dist, pred = dijkstra(we, directed=True, return_predecessors=True)
+    best: tuple[float, int, int] | None = None
+    for source in range(n):
+        # Covered length along the shortest-path tree, filled in order of distance.
+        covered = np.zeros(n)
+        for node in np.argsort(dist[source]):
+            parent = pred[source, node]
+            if parent < 0 or not np.isfinite(dist[source, node]):
+                continue
+            covered[node] = covered[parent] + cover[parent, node]
+        score = covered - _COST_METERS * np.where(np.isfinite(dist[source]), dist[source], np.inf)
+        score[source] = -np.inf
+        target = int(np.argmax(score))
+        if np.isfinite(score[target]) and (best is None or score[target] > best[0]):
+            best = (float(score[target]), source, target)
+    if best is None:
+        return None
+    _, source, target = best
     path = [target]
     while path[-1] != source:
-        path.append(int(pred[path[-1]]))
-    return path[::-1], float(dist[target])
+        path.append(int(pred[source, path[-1]]))
+    return path[::-1], float(dist[source, target])
 
 
 def _corners_only(points: FloatArray) -> FloatArray:
@@ -229,7 +236,7 @@ def find_wall_chain(lines: list[WallLine], params: LayoutParams) -> WallChain | 
     Parameters
     ----------
     lines : candidate wall lines of one fragment, aligned frame.
-    params : the complexity penalty lambda.
+    params : the complexity penalty lambda and the source/target rule.
 
     Returns
     -------
@@ -237,17 +244,14 @@ def find_wall_chain(lines: list[WallLine], params: LayoutParams) -> WallChain | 
     """
     if not lines:
         return None
-    lines = lines + _occluded_links(lines, params.cell_size)
     nodes = _build_nodes(lines)
-    we, st = _edges(lines, nodes, params.complexity_penalty)
-    ends = _tree_ends(st)
-    if ends is None:
+    we, st, cover = _edges(lines, nodes, params.complexity_penalty)
+    if params.source_target == "spanning_forest":
+        found = _forest_path(we, st)
+    else:
+        found = _best_path(we, cover)
+    if found is None:
         return None
-    u, v = ends
-    forward, backward = _path(we, u, v), _path(we, v, u)
-    candidates = [p for p in (forward, backward) if p is not None]
-    if not candidates:
-        return None
-    order, cost = min(candidates, key=lambda pc: pc[1])
+    order, cost = found
     points = np.array([nodes.points[i] for i in order])
     return WallChain(keypoints=_corners_only(points), cost=cost)

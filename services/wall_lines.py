@@ -30,6 +30,7 @@ _NEAR_STRIP = 0.12  # m, the strips skip the wall's own noisy band
 _FAR_STRIP = 1.0  # m, depth of the strips in front of and behind a wall
 _BEHIND_RATIO = 0.3  # behind/front occupancy above which a cell is not a boundary
 _MAX_GAP_CELLS = 2  # low cells bridged inside one candidate segment
+_OCCLUSION_REACH = 3.0  # m, longest occluded stretch bridged between parallel walls
 _TOP_REACH = 0.85  # share of the floor-to-ceiling band a wall column must reach
 
 
@@ -200,6 +201,71 @@ def _lines_from_peak(
     return lines
 
 
+def _occluded_links(lines: list[WallLine], grid: _Grid) -> list[WallLine]:
+    """Deduced walls joining misaligned parallel segments that face the same interior.
+
+    Only where the deduced wall bounds the scanned space like a real one (nothing seen
+    behind it): a bridge across observed floor would be a shortcut, not an occluded wall.
+    """
+    cell = grid.cell
+    deduced: list[WallLine] = []
+    for a in lines:
+        for b in lines:
+            if a is b or a.axis != b.axis or a.travel != b.travel or a.virtual or b.virtual:
+                continue
+            if abs(a.offset - b.offset) < 2 * cell:
+                continue
+            for end in a.segments[:, 1] if a.travel > 0 else a.segments[:, 0]:
+                for start in b.segments[:, 0] if a.travel > 0 else b.segments[:, 1]:
+                    ahead = (start - end) * a.travel
+                    if -2 * cell <= ahead <= _OCCLUSION_REACH:
+                        bridges = (_bridge(a, b, run) for run in (end, start))
+                        deduced.extend(
+                            br
+                            for br in bridges
+                            if _bounds_scan(br, grid) and not _explained(br, lines, cell)
+                        )
+    return deduced
+
+
+def _explained(bridge: WallLine, lines: list[WallLine], cell: float) -> bool:
+    """True when a real wall already runs where the bridge would (within two cells)."""
+    return any(
+        not line.virtual
+        and line.axis == bridge.axis
+        and abs(line.offset - bridge.offset) <= 2 * cell
+        for line in lines
+    )
+
+
+def _bounds_scan(line: WallLine, grid: _Grid) -> bool:
+    """True when little was seen behind the (deduced) wall compared to in front of it."""
+    run = line.origin + (np.arange(len(line.high)) + 0.5) * line.cell_size
+    cells = np.floor((run - grid.origin[line.axis]) / grid.cell).astype(np.int64)
+    behind, front = grid.strip_sums(line.axis, line.offset, cells)
+    interior = line.travel if line.axis == 0 else -line.travel
+    near, far = (front, behind) if interior > 0 else (behind, front)
+    return bool(far.sum() <= _BEHIND_RATIO * max(float(near.sum()), float(len(cells))))
+
+
+def _bridge(a: WallLine, b: WallLine, run: float) -> WallLine:
+    """A fully evidenced wall at run coordinate ``run`` from line ``a`` over to line ``b``."""
+    lo, hi = sorted((a.offset, b.offset))
+    cells = max(1, round((hi - lo) / a.cell_size))
+    # The chain walks along a, then across to b: the bridge is travelled from a to b.
+    travel = 1 if b.offset > a.offset else -1
+    return WallLine(
+        axis=1 - a.axis,
+        offset=float(run),
+        travel=travel,
+        origin=lo,
+        cell_size=(hi - lo) / cells,
+        high=np.ones(cells, dtype=bool),
+        segments=np.array([[lo, hi]]),
+        virtual=True,
+    )
+
+
 def find_wall_lines(
     aligned: FloatArray,
     normals: FloatArray,
@@ -241,4 +307,4 @@ def find_wall_lines(
             members = wall_points[near]
             offset = float(np.median(members[:, offset_axis]))
             lines += _lines_from_peak(axis, offset, members, grid, rule, params)
-    return lines
+    return lines + _occluded_links(lines, grid)
