@@ -23,7 +23,7 @@ from schemas.result import (
 from services.layout_model import build_polygon
 from services.local_layout import estimate_local_layout
 from services.placement import Placement, make_piece, place_pieces, rot90
-from services.refinement import refine_translations
+from services.refinement import Refinement, refine_translations
 from services.types import FloatArray, LocalLayout
 
 __all__ = ["ProgressFn", "estimate_layout", "fragment_pose", "place_site"]
@@ -130,7 +130,11 @@ def place_site(
     report("refinement", 0.7)
     best = placement.best
     ordered = [pieces[fid] for fid in best.order]
-    refined = refine_translations(ordered, best.rotations, placement.translations)
+    if placement.closed:
+        refined = refine_translations(ordered, best.rotations, placement.translations)
+    else:
+        # An open chain is already joined end to end; there is no loop to refine.
+        refined = Refinement(placement.translations, "skipped: open chain", 0.0, 0.0)
     translations = refined.translations
     for index, (fid, rotation) in enumerate(zip(best.order, best.rotations, strict=True)):
         pose = fragment_pose(layouts[fid], rotation, translations[index])
@@ -139,7 +143,7 @@ def place_site(
         fragments[fid].loop_index = index
     closed = (
         placement.closed
-        and len(usable) == len(layouts)
+        and len(best.order) == len(layouts)
         and len(usable) >= 2
         and refined.status == "solved"
         and refined.violation_after <= params.placement.closure_tolerance

@@ -26,6 +26,7 @@ from scipy.spatial import cKDTree
 from scipy.special import erf
 
 from schemas.params import PlacementParams
+from services.geometry import distance_to_polygon, points_in_polygon
 from services.types import FloatArray, LocalLayout
 
 __all__ = [
@@ -40,6 +41,7 @@ __all__ = [
 
 _TURNS = (0, 1, -1)  # continue, turn left (convex corner), turn right (concave corner)
 _CROSS_EPS = 0.05  # m, walls may touch within this distance but not cross
+_UNPLACED_PENALTY = 100.0  # energy per piece left out of an open chain
 _HULL_TOLERANCE = 0.35  # m, hull vertices closer than this to their chord are dropped
 
 
@@ -197,7 +199,7 @@ class _Search:
     successor: dict[int, int]
     predecessor: dict[int, int]
     require_closed: bool
-    cheapest_entry: dict[int, float] = field(default_factory=dict)
+    cheapest_pair: list[list[float]] = field(default_factory=list)
     top: list[tuple[float, int, PlacementCandidate]] = field(default_factory=list)
     nodes: int = 0
     counter: itertools.count[int] = field(default_factory=itertools.count)
@@ -313,14 +315,48 @@ def _close(search: _Search, state: _State) -> None:
     w_l, w_c, w_b = search.weights()
     corners = state.corners + (turn not in (0, 2))
     closure = float(np.abs(state.end).sum())
-    boundary = state.boundary + (search.mismatch[(state.order[-1], 0, turn)] if turn != 2 else 1.0)
+    closing = search.mismatch.get((state.order[-1], 0, turn), 1.0)
+    boundary = state.boundary + closing
+    if len(state.order) < len(search.pieces):
+        # A partial chain (open search): nothing closes, so no closing junction to score.
+        corners, closure, boundary = state.corners, 0.0, state.boundary
     # The hull has at least 4 edges: skip computing it when even that cannot win.
     if w_l * (corners + 4) + w_c * closure + w_b * boundary >= search.bound():
         return
     complexity = corners + _hull_edges(state.vertices)
     energy = w_l * complexity + w_c * closure + w_b * boundary
+    free_space = 0.0
+    if search.params.use_free_space and energy < search.bound():
+        free_space = _outside_share(search, state)
+        energy += search.params.free_space_weight * free_space
+    energy += _UNPLACED_PENALTY * (len(search.pieces) - len(state.order))
     ids = tuple(search.pieces[i].id for i in state.order)
-    search.record(PlacementCandidate(energy, ids, state.rotations, complexity, closure, boundary))
+    search.record(
+        PlacementCandidate(energy, ids, state.rotations, complexity, closure, boundary, free_space)
+    )
+
+
+def _outside_share(search: _Search, state: _State) -> float:
+    """Summed share of each piece's footprint that falls outside the placed loop.
+
+    Footprint cells just outside a wall (within the margin) count as inside: wall
+    thickness, noise and the unrefined junctions put a few there.
+    """
+    polygon = state.vertices
+    total = 0.0
+    end = np.zeros(2)
+    for index, rotation in zip(state.order, state.rotations, strict=True):
+        piece = search.pieces[index]
+        local_pts, _ = piece.rotated[rotation]
+        cells = piece.footprint @ rot90(rotation).T + end
+        end = end + local_pts[-1]
+        if len(cells) == 0:
+            continue
+        outside = ~points_in_polygon(cells, polygon)
+        if outside.any():
+            far = distance_to_polygon(cells[outside], polygon) > search.params.free_space_margin
+            total += float(far.sum()) / len(cells)
+    return total
 
 
 def _lower_bound(search: _Search, state: _State, remaining: Sequence[int]) -> float:
@@ -339,7 +375,12 @@ def _lower_bound(search: _Search, state: _State, remaining: Sequence[int]) -> fl
     if not search.require_closed:
         owed = 0
     corners = state.corners + sum(pieces[i].corners for i in remaining) + owed
-    boundary = state.boundary + sum(search.cheapest_entry[i] for i in (*remaining, 0))
+    # Each piece left (and the loop's start) is entered from the last placed piece or from
+    # another piece left, at the cheapest turn.
+    sources = (state.order[-1], *remaining)
+    boundary = state.boundary + sum(
+        min(search.cheapest_pair[a][b] for a in sources if a != b) for b in (*remaining, 0)
+    )
     return w_l * (corners + 4) + w_c * closure + w_b * boundary
 
 
@@ -347,9 +388,12 @@ def _dfs(search: _Search, state: _State, remaining: tuple[int, ...]) -> None:
     search.nodes += 1
     if search.nodes > search.params.max_search_nodes:
         return
-    if not remaining:
+    if not remaining or not search.require_closed:
+        # An open search also keeps partial chains: the best one is placed when no
+        # arrangement of all pieces exists (walls would cross).
         _close(search, state)
-        return
+        if not remaining:
+            return
     if _lower_bound(search, state, remaining) >= search.bound():
         return
     k = len(remaining)
@@ -399,11 +443,11 @@ def _root(first: Piece, params: PlacementParams) -> _State:
     )
 
 
-def _cheapest_entries(mismatch: Mapping[tuple[int, int, int], float], n: int) -> dict[int, float]:
-    """Lowest boundary mismatch with which each piece can follow another."""
-    best = dict.fromkeys(range(n), 1.0)
-    for (_, b, _), value in mismatch.items():
-        best[b] = min(best[b], value)
+def _cheapest_pairs(mismatch: Mapping[tuple[int, int, int], float], n: int) -> list[list[float]]:
+    """Lowest boundary mismatch of b following a, over the junction turns: [a][b]."""
+    best = [[1.0] * n for _ in range(n)]
+    for (a, b, _), value in mismatch.items():
+        best[a][b] = min(best[a][b], value)
     return best
 
 
@@ -448,7 +492,7 @@ def place_pieces(
     nodes = 0
     for require_closed in (True, False):
         search = _Search(list(pieces), params, mismatch, successor, predecessor, require_closed)
-        search.cheapest_entry = _cheapest_entries(mismatch, n)
+        search.cheapest_pair = _cheapest_pairs(mismatch, n)
         _dfs(search, root, tuple(range(1, n)))
         nodes += search.nodes
         if search.top:
