@@ -1,0 +1,47 @@
+"""What every front end (HTTP here, zenoh next) needs to reach the service's storage."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from dataclasses import dataclass
+
+import redis.asyncio as aioredis
+
+from schemas.settings import Settings
+from worker.connection import REDIS_DOWN, async_client, ensure_group_async
+from worker.keys import Keys
+
+__all__ = ["Backend"]
+
+
+@dataclass
+class Backend:
+    """Settings, the asyncio Redis client and the key names, shared by one front end."""
+
+    settings: Settings
+    redis: aioredis.Redis
+    keys: Keys
+
+    @classmethod
+    async def connect(cls, settings: Settings) -> Backend:
+        """Connect (waiting up to ``startup_timeout_s`` for Redis) and create the job group."""
+        if not settings.redis_url:
+            raise ValueError("no Redis URL: run `jigsaw serve` or set FPJ_REDIS_URL")
+        client = async_client(settings.redis_url, timeout=settings.redis_timeout_s)
+        keys = Keys(settings.key_prefix)
+        deadline = time.monotonic() + settings.startup_timeout_s
+        while True:
+            try:
+                await client.ping()
+                await ensure_group_async(client, keys)
+                break
+            except REDIS_DOWN:
+                if time.monotonic() > deadline:
+                    await client.aclose()
+                    raise
+                await asyncio.sleep(0.2)
+        return cls(settings, client, keys)
+
+    async def aclose(self) -> None:
+        await self.redis.aclose()

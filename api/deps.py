@@ -1,0 +1,72 @@
+"""Dependencies of the routes, as ``Annotated`` aliases (ids, the backend, auth, sites)."""
+
+from __future__ import annotations
+
+import hmac
+from typing import Annotated, cast
+
+from fastapi import Depends, Path, Request
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+
+from api.backend import Backend
+from api.errors import ForbiddenError, SiteNotFoundError, UnauthorizedError, check_id
+from api.store import site_exists
+
+__all__ = [
+    "BackendDep",
+    "ExistingSite",
+    "FragmentId",
+    "SiteId",
+    "get_backend",
+    "require_token",
+]
+
+_ID_DOC = "1 to 64 characters of [A-Za-z0-9._-]"
+
+
+def get_backend(request: Request) -> Backend:
+    """The backend the app's lifespan connected."""
+    return cast(Backend, request.app.state.backend)
+
+
+BackendDep = Annotated[Backend, Depends(get_backend)]
+
+
+def _site_id(site_id: Annotated[str, Path(description=f"site id, {_ID_DOC}")]) -> str:
+    return check_id(site_id, "site id")
+
+
+def _fragment_id(
+    fragment_id: Annotated[str, Path(description=f"fragment id, {_ID_DOC}")],
+) -> str:
+    return check_id(fragment_id, "fragment id")
+
+
+SiteId = Annotated[str, Depends(_site_id)]
+FragmentId = Annotated[str, Depends(_fragment_id)]
+
+
+async def _existing_site(site_id: SiteId, backend: BackendDep) -> str:
+    if not await site_exists(backend, site_id):
+        raise SiteNotFoundError(f"unknown site {site_id!r}")
+    return site_id
+
+
+ExistingSite = Annotated[str, Depends(_existing_site)]
+
+_bearer = HTTPBearer(auto_error=False, description="one of the tokens of FPJ_TOKENS")
+
+
+async def require_token(
+    backend: BackendDep,
+    credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
+) -> None:
+    """With tokens configured: 401 without a bearer token, 403 with an unknown one."""
+    tokens = backend.settings.tokens
+    if not tokens:
+        return
+    if credentials is None:
+        raise UnauthorizedError("a bearer token is required (Authorization: Bearer <token>)")
+    given = credentials.credentials.encode()
+    if not any(hmac.compare_digest(given, token.encode()) for token in tokens):
+        raise ForbiddenError("unknown bearer token")

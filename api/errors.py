@@ -1,0 +1,194 @@
+"""Service errors, and the one mapping from errors to HTTP status codes and bodies.
+
+Every error response has the body ``{"error": {"code": ..., "message": ...}}``; no handler
+ever answers with a traceback.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from typing import Any
+
+import redis
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from schemas.service import ErrorBody, ErrorDetail
+from services.errors import (
+    FragmentError,
+    FragmentTooLargeError,
+    InvalidFragmentError,
+    JigsawError,
+    UnsupportedFormatError,
+)
+
+__all__ = [
+    "ConflictError",
+    "ForbiddenError",
+    "FragmentNotFoundError",
+    "InvalidIdError",
+    "NotFoundError",
+    "ServiceError",
+    "SiteNotFoundError",
+    "UnauthorizedError",
+    "UnavailableError",
+    "check_id",
+    "error_body",
+    "error_responses",
+    "install_error_handlers",
+    "status_for",
+]
+
+log = logging.getLogger(__name__)
+
+ID_PATTERN = re.compile(r"[A-Za-z0-9._-]{1,64}")
+
+
+class ServiceError(JigsawError):
+    """Failures of the service itself (as opposed to a fragment's content)."""
+
+    code = "service_error"
+
+
+class InvalidIdError(ServiceError):
+    code = "invalid_id"
+
+
+class NotFoundError(ServiceError):
+    code = "not_found"
+
+
+class SiteNotFoundError(NotFoundError):
+    code = "site_not_found"
+
+
+class FragmentNotFoundError(NotFoundError):
+    code = "fragment_not_found"
+
+
+class ConflictError(ServiceError):
+    """Different bytes under an id that already holds a fragment."""
+
+    code = "conflict"
+
+
+class UnauthorizedError(ServiceError):
+    code = "unauthorized"
+
+
+class ForbiddenError(ServiceError):
+    code = "forbidden"
+
+
+class UnavailableError(ServiceError):
+    """Redis (or something else the service needs) cannot be reached right now."""
+
+    code = "unavailable"
+
+
+# The one mapping. The most specific class in an error's MRO decides.
+_STATUS: dict[type[JigsawError], int] = {
+    InvalidIdError: 400,
+    UnauthorizedError: 401,
+    ForbiddenError: 403,
+    NotFoundError: 404,
+    ConflictError: 409,
+    FragmentTooLargeError: 413,
+    UnsupportedFormatError: 415,
+    InvalidFragmentError: 422,
+    FragmentError: 422,
+    UnavailableError: 503,
+}
+
+_DESCRIPTIONS = {
+    400: "invalid id (1 to 64 characters of [A-Za-z0-9._-])",
+    401: "missing bearer token",
+    403: "unknown bearer token",
+    404: "unknown site or fragment",
+    409: "different bytes already stored under this fragment id",
+    413: "upload too large (bytes or points)",
+    415: "not a PLY or PCD file",
+    422: "invalid content: empty, truncated, malformed, too few finite points",
+    503: "Redis unreachable; retry later",
+}
+
+
+def status_for(exc: JigsawError) -> int:
+    """HTTP status of an error (500 for anything not mapped)."""
+    for cls in type(exc).__mro__:
+        if cls in _STATUS:
+            return _STATUS[cls]
+    return 500
+
+
+def check_id(value: str, what: str) -> str:
+    """Return ``value`` if it is a valid site or fragment id, else raise InvalidIdError."""
+    if not ID_PATTERN.fullmatch(value):
+        raise InvalidIdError(f"invalid {what} {value[:80]!r}: use 1 to 64 of [A-Za-z0-9._-]")
+    return value
+
+
+def error_body(code: str, message: str) -> dict[str, Any]:
+    """The JSON body of an error response."""
+    return ErrorBody(error=ErrorDetail(code=code, message=message)).model_dump()
+
+
+def error_responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
+    """OpenAPI ``responses`` entries declaring the error body for each status."""
+    return {s: {"model": ErrorBody, "description": _DESCRIPTIONS[s]} for s in statuses}
+
+
+def _headers(status: int) -> dict[str, str] | None:
+    if status == 401:
+        return {"WWW-Authenticate": "Bearer"}
+    if status == 503:
+        return {"Retry-After": "1"}
+    return None
+
+
+def jigsaw_response(exc: JigsawError) -> JSONResponse:
+    status = status_for(exc)
+    if status >= 500:
+        log.log(logging.INFO if status == 503 else logging.ERROR, "%s: %s", exc.code, exc.message)
+    body = error_body(exc.code, exc.message)
+    return JSONResponse(body, status_code=status, headers=_headers(status))
+
+
+async def _on_jigsaw(request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, JigsawError)
+    return jigsaw_response(exc)
+
+
+async def _on_redis_down(request: Request, exc: Exception) -> JSONResponse:
+    return jigsaw_response(UnavailableError(f"storage unavailable: {type(exc).__name__}: {exc}"))
+
+
+async def _on_validation(request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, RequestValidationError)
+    parts = [f"{'.'.join(str(p) for p in e.get('loc', ()))}: {e.get('msg')}" for e in exc.errors()]
+    return JSONResponse(error_body("invalid_request", "; ".join(parts)), status_code=422)
+
+
+async def _on_http(request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, StarletteHTTPException)
+    codes = {404: "not_found", 405: "method_not_allowed"}
+    body = error_body(codes.get(exc.status_code, "http_error"), str(exc.detail))
+    return JSONResponse(body, status_code=exc.status_code, headers=exc.headers)
+
+
+async def _on_unexpected(request: Request, exc: Exception) -> JSONResponse:
+    log.exception("unexpected error on %s %s", request.method, request.url.path, exc_info=exc)
+    return JSONResponse(error_body("internal_error", "internal server error"), status_code=500)
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    """Register the handlers that turn every failure into the contract's error body."""
+    app.add_exception_handler(JigsawError, _on_jigsaw)
+    app.add_exception_handler(redis.exceptions.ConnectionError, _on_redis_down)
+    app.add_exception_handler(redis.exceptions.TimeoutError, _on_redis_down)
+    app.add_exception_handler(RequestValidationError, _on_validation)
+    app.add_exception_handler(StarletteHTTPException, _on_http)
+    app.add_exception_handler(Exception, _on_unexpected)

@@ -1,0 +1,54 @@
+"""Assembles the FastAPI application: lifespan, error handlers, routers."""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+from fastapi import Depends, FastAPI
+
+from api.backend import Backend
+from api.deps import require_token
+from api.errors import install_error_handlers
+from api.routers import events, fragments, health, metrics, sites
+from schemas.settings import Settings, get_settings
+
+__all__ = ["create_app"]
+
+DESCRIPTION = """\
+Upload partial indoor scans (PLY or PCD fragments) of a site; the service estimates each
+fragment's wall layout, assembles the layouts into one closed floorplan loop and returns
+per-fragment poses and the floorplan (contract v1, sections 3 and 4).
+
+Every error answers `{"error": {"code": ..., "message": ...}}`. With `FPJ_TOKENS` set, every
+route but `/healthz` and `/readyz` needs `Authorization: Bearer <token>`.
+"""
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """The service's ASGI app; ``settings`` must carry a Redis URL (default: the environment)."""
+    settings = settings or get_settings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        backend = await Backend.connect(settings)
+        app.state.backend = backend
+        try:
+            yield
+        finally:
+            await backend.aclose()
+
+    app = FastAPI(
+        title="Floorplan-Jigsaw",
+        version="1.0.0",
+        description=DESCRIPTION,
+        lifespan=lifespan,
+    )
+    install_error_handlers(app)
+    auth = [Depends(require_token)]
+    app.include_router(health.router)
+    app.include_router(metrics.router, dependencies=auth)
+    app.include_router(sites.router, dependencies=auth)
+    app.include_router(fragments.router, dependencies=auth)
+    app.include_router(events.router, dependencies=auth)
+    return app

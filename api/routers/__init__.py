@@ -1,0 +1,1 @@
+"""One router per resource: fragments, sites, events, health, metrics."""

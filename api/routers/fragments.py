@@ -1,0 +1,72 @@
+"""``/v1/sites/{site_id}/fragments/{fragment_id}``: upload, inspect, delete a fragment."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter, Request, Response
+from fastapi.responses import JSONResponse
+
+from api.body import read_limited
+from api.deps import BackendDep, ExistingSite, FragmentId, SiteId
+from api.errors import error_responses
+from api.ingest import ingest_fragment
+from api.store import delete_fragment, load_fragment
+from schemas.service import FragmentStatus, UploadReply
+
+__all__ = ["router"]
+
+router = APIRouter(prefix="/v1/sites/{site_id}/fragments", tags=["fragments"])
+
+_BODY: dict[str, Any] = {
+    "requestBody": {
+        "required": True,
+        "description": "the fragment file's bytes (PLY or PCD)",
+        "content": {"application/octet-stream": {"schema": {"type": "string", "format": "binary"}}},
+    }
+}
+
+
+@router.put(
+    "/{fragment_id}",
+    status_code=202,
+    response_model=UploadReply,
+    summary="Upload a fragment",
+    openapi_extra=_BODY,
+    responses={
+        200: {"model": UploadReply, "description": "identical bytes already stored (no-op)"},
+        202: {"model": UploadReply, "description": "accepted; its layout job is queued"},
+        **error_responses(400, 401, 403, 409, 413, 415, 422, 503),
+    },
+)
+async def upload_fragment(
+    site_id: SiteId, fragment_id: FragmentId, request: Request, backend: BackendDep
+) -> JSONResponse:
+    """Store a fragment (idempotent by content hash) and queue its processing."""
+    data = await read_limited(request, backend.settings.max_upload_bytes)
+    reply = await ingest_fragment(backend, site_id, fragment_id, data)
+    return JSONResponse(reply.model_dump(mode="json"), status_code=202 if reply.created else 200)
+
+
+@router.get(
+    "/{fragment_id}",
+    summary="Status of one fragment",
+    responses=error_responses(400, 401, 403, 404, 503),
+)
+async def get_fragment(
+    site_id: ExistingSite, fragment_id: FragmentId, backend: BackendDep
+) -> FragmentStatus:
+    return await load_fragment(backend, site_id, fragment_id)
+
+
+@router.delete(
+    "/{fragment_id}",
+    status_code=204,
+    summary="Delete a fragment (the site is re-placed)",
+    responses=error_responses(400, 401, 403, 404, 503),
+)
+async def remove_fragment(
+    site_id: ExistingSite, fragment_id: FragmentId, backend: BackendDep
+) -> Response:
+    await delete_fragment(backend, site_id, fragment_id)
+    return Response(status_code=204)

@@ -1,0 +1,80 @@
+"""``/v1/sites``: the list, a site's status, its result and a picture of its floorplan."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Query, Response
+from fastapi.responses import JSONResponse
+
+from api.deps import BackendDep, ExistingSite
+from api.errors import error_responses
+from api.floorplan_svg import render_floorplan_svg
+from api.store import list_sites, load_result, load_site_status
+from schemas.result import ResultModel
+from schemas.service import PendingReply, SiteList, SiteStatus
+
+__all__ = ["router"]
+
+router = APIRouter(prefix="/v1/sites", tags=["sites"])
+
+_PENDING: dict[int | str, dict[str, Any]] = {
+    202: {"model": PendingReply, "description": "nothing has been placed yet"}
+}
+
+
+def _pending(site_id: str) -> JSONResponse:
+    return JSONResponse(PendingReply(site_id=site_id).model_dump(), status_code=202)
+
+
+@router.get("", summary="List sites", responses=error_responses(401, 403, 503))
+async def get_sites(
+    backend: BackendDep,
+    offset: Annotated[int, Query(ge=0)] = 0,
+    limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+) -> SiteList:
+    return await list_sites(backend, offset, limit)
+
+
+@router.get(
+    "/{site_id}",
+    summary="Status of a site: its fragments' processing and its placement",
+    responses=error_responses(400, 401, 403, 404, 503),
+)
+async def get_site(site_id: ExistingSite, backend: BackendDep) -> SiteStatus:
+    return await load_site_status(backend, site_id)
+
+
+@router.get(
+    "/{site_id}/result",
+    summary="Result JSON of the newest global placement (contract section 3)",
+    response_model=ResultModel,
+    responses={
+        200: {"description": "the result (status closed, open or failed)"},
+        **_PENDING,
+        **error_responses(400, 401, 403, 404, 503),
+    },
+)
+async def get_result(site_id: ExistingSite, backend: BackendDep) -> Response:
+    body = await load_result(backend, site_id)
+    if body is None:
+        return _pending(site_id)
+    return Response(body, media_type="application/json")
+
+
+@router.get(
+    "/{site_id}/floorplan.svg",
+    summary="Picture of the current floorplan and fragment placements",
+    response_class=Response,
+    responses={
+        200: {"content": {"image/svg+xml": {}}, "description": "SVG picture"},
+        **_PENDING,
+        **error_responses(400, 401, 403, 404, 503),
+    },
+)
+async def get_floorplan_svg(site_id: ExistingSite, backend: BackendDep) -> Response:
+    body = await load_result(backend, site_id)
+    if body is None:
+        return _pending(site_id)
+    svg = render_floorplan_svg(ResultModel.model_validate_json(body), title=site_id)
+    return Response(svg, media_type="image/svg+xml")

@@ -1,0 +1,144 @@
+"""Wire models of the HTTP API and of the events the workers publish (versioned JSON).
+
+Internal records (Redis hashes) are converted to these in :mod:`worker.records`; the result
+JSON itself is :class:`schemas.result.ResultModel`.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from schemas.jobs import FragmentState, PlacementState
+
+__all__ = [
+    "EVENT_VERSION",
+    "ErrorBody",
+    "ErrorDetail",
+    "FragmentStatus",
+    "HealthReply",
+    "PendingReply",
+    "PlacementStatus",
+    "ReadyReply",
+    "SiteEvent",
+    "SiteList",
+    "SiteStatus",
+    "SiteSummary",
+    "UploadReply",
+]
+
+EVENT_VERSION = 1
+
+
+class _Wire(BaseModel):
+    model_config = ConfigDict(frozen=True)
+
+
+class ErrorDetail(_Wire):
+    code: str = Field(description="stable machine-readable identifier", examples=["conflict"])
+    message: str = Field(description="human-readable explanation")
+
+
+class ErrorBody(_Wire):
+    """Every 4xx/5xx body: ``{"error": {"code": ..., "message": ...}}``."""
+
+    error: ErrorDetail
+
+
+class UploadReply(_Wire):
+    """Reply to an upload: 202 when new, 200 when the same bytes were already stored."""
+
+    fragment_id: str
+    site_id: str
+    status: FragmentState = Field(description="the fragment's processing state")
+    created: bool = Field(description="false when identical bytes were already stored")
+    sha256: str
+    size_bytes: int
+    format: str = Field(description="ply or pcd")
+    n_points: int = Field(description="finite points")
+    dropped_nonfinite: int
+
+
+class FragmentStatus(_Wire):
+    fragment_id: str
+    state: FragmentState
+    stage: str = Field("", description="pipeline stage of the running job")
+    progress: float = Field(0.0, ge=0.0, le=1.0)
+    error: ErrorDetail | None = Field(None, description="why the fragment failed (or retried)")
+    tries: int = 0
+    sha256: str
+    size_bytes: int
+    format: str
+    n_points: int
+    dropped_nonfinite: int = 0
+    created_at: float
+    updated_at: float
+
+
+class PlacementStatus(_Wire):
+    state: PlacementState = PlacementState.IDLE
+    stage: str = ""
+    progress: float = Field(0.0, ge=0.0, le=1.0)
+    error: ErrorDetail | None = None
+    generation: int = Field(0, description="changes of the site's set of usable layouts")
+    result_generation: int | None = Field(None, description="generation the result is of")
+    result_status: Literal["closed", "open", "failed"] | None = None
+    loop_closed: bool = False
+    last_placement_at: float | None = Field(None, description="unix time of the last result")
+    started_at: float | None = Field(None, description="unix time the newest run started")
+
+
+class SiteStatus(_Wire):
+    site_id: str
+    created_at: float
+    updated_at: float
+    fragments: list[FragmentStatus]
+    placement: PlacementStatus
+
+
+class SiteSummary(_Wire):
+    site_id: str
+    n_fragments: int
+    placement: PlacementStatus
+    updated_at: float
+
+
+class SiteList(_Wire):
+    sites: list[SiteSummary]
+    total: int
+
+
+class PendingReply(_Wire):
+    """202 from the result endpoints: nothing has been placed yet."""
+
+    site_id: str
+    status: Literal["processing"] = "processing"
+    message: str = "fragments are still being processed and nothing has been placed"
+
+
+class HealthReply(_Wire):
+    status: Literal["ok"] = "ok"
+
+
+class ReadyReply(_Wire):
+    status: Literal["ready"] = "ready"
+    redis: Literal["ok"] = "ok"
+    workers: int = Field(description="workers with a recent heartbeat")
+
+
+class SiteEvent(_Wire):
+    """A message on a site's Redis channel, forwarded as one server-sent event.
+
+    ``type``: ``fragment`` (state, stage, progress of one fragment; ``data`` a FragmentStatus,
+    or ``{"fragment_id", "deleted": true}``), ``placement`` (``data`` a PlacementStatus) or
+    ``result`` (``data`` the result JSON of the contract).
+    """
+
+    version: Literal[1] = 1
+    type: Literal["fragment", "placement", "result"]
+    site_id: str
+    fragment_id: str | None = None
+    generation: int | None = None
+    time: float
+    data: dict[str, Any]

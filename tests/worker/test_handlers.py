@@ -1,0 +1,192 @@
+"""Layout and placement handlers with the real pipeline on real Redis (in-process consumer)."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+
+import pytest
+import redis
+
+from api.backend import Backend
+from api.ingest import ingest_fragment
+from api.store import delete_fragment
+from schemas.jobs import LayoutJob, PlacementJob, decode_job
+from schemas.result import ResultModel
+from services.point_io import encode_ply
+from services.synthetic import SceneSpec, SyntheticScene, generate_scene
+from tests.service_fixtures import make_settings
+from worker.consumer import Consumer, LeaseBook
+from worker.handlers import HANDLERS
+from worker.keys import Keys
+from worker.updates import JobContext, JobTimeoutError, store_result, update_fragment
+
+pytestmark = pytest.mark.timeout(60)
+
+KEYS = Keys("fpj")
+
+
+@pytest.fixture(scope="module")
+def scene() -> SyntheticScene:
+    return generate_scene(SceneSpec.easy(), 0)
+
+
+@pytest.fixture
+def setup(any_redis: str):
+    settings = make_settings(any_redis)
+    client = redis.Redis.from_url(any_redis, decode_responses=True)
+    raw = redis.Redis.from_url(any_redis)
+    yield settings, client, raw
+    client.close()
+    raw.close()
+
+
+def _upload(settings, site: str, fragments: dict[str, bytes]) -> None:
+    async def run() -> None:
+        backend = await Backend.connect(settings)
+        try:
+            for fid, data in fragments.items():
+                await ingest_fragment(backend, site, fid, data)
+        finally:
+            await backend.aclose()
+
+    asyncio.run(run())
+
+
+def _delete(settings, site: str, fid: str) -> None:
+    async def run() -> None:
+        backend = await Backend.connect(settings)
+        try:
+            await delete_fragment(backend, site, fid)
+        finally:
+            await backend.aclose()
+
+    asyncio.run(run())
+
+
+def _consumer(settings, client, raw) -> Consumer:
+    return Consumer("c", client, raw, settings, LeaseBook(), threading.Event())
+
+
+def _run_all(consumer: Consumer, limit: int = 30) -> int:
+    """Run jobs until the stream is empty; returns how many ran."""
+    count = 0
+    while consumer.client.xlen(KEYS.jobs) and count < limit:
+        consumer.step()
+        count += 1
+    return count
+
+
+def _ctx(settings, client, raw, **kwargs) -> JobContext:
+    return JobContext(client, raw, KEYS, settings, settings.pipeline_params(), **kwargs)
+
+
+def test_site_is_laid_out_then_placed_once(setup, scene: SyntheticScene) -> None:
+    settings, client, raw = setup
+    _upload(settings, "site", {f.id: encode_ply(f.points) for f in scene.fragments})
+    consumer = _consumer(settings, client, raw)
+    runs = _run_all(consumer)
+    # One layout job per fragment, and the placements coalesced: the first placement request
+    # enqueues one job; later requests only bump the generation; since every layout finished
+    # before it ran, exactly one placement ran.
+    assert runs == len(scene.fragments) + 1
+    site = client.hgetall(KEYS.site("site"))
+    assert site["placement_state"] == "done"
+    assert site["result_generation"] == site["generation"] == str(len(scene.fragments))
+    result = ResultModel.model_validate_json(client.get(KEYS.result("site")))
+    assert result.status == "closed"
+    assert [f.id for f in result.fragments] == [f.id for f in scene.fragments]
+    for fragment in scene.fragments:
+        record = client.hgetall(KEYS.fragment("site", fragment.id))
+        assert record["state"] == "done" and record["progress"] == "1"
+        assert client.exists(KEYS.fragment_layout("site", fragment.id))
+    assert client.get(KEYS.placement_flag("site")) is None
+
+
+def test_duplicate_delivery_changes_nothing(setup, scene: SyntheticScene) -> None:
+    settings, client, raw = setup
+    fragment = scene.fragments[0]
+    _upload(settings, "site", {fragment.id: encode_ply(fragment.points)})
+    job_json = client.xrange(KEYS.jobs)[0][1]["job"]
+    consumer = _consumer(settings, client, raw)
+    _run_all(consumer)
+    layout = client.get(KEYS.fragment_layout("site", fragment.id))
+    generation = client.hget(KEYS.site("site"), "generation")
+    HANDLERS["layout"].run(_ctx(settings, client, raw), decode_job(job_json))
+    assert client.get(KEYS.fragment_layout("site", fragment.id)) == layout
+    # The layout and its placement request were written in one step: nothing to redo.
+    assert client.hget(KEYS.site("site"), "generation") == generation
+
+
+def test_stale_job_of_replaced_bytes_is_ignored(setup, scene: SyntheticScene) -> None:
+    settings, client, raw = setup
+    fragment = scene.fragments[0]
+    _upload(settings, "site", {fragment.id: encode_ply(fragment.points)})
+    stale = LayoutJob(site_id="site", fragment_id=fragment.id, sha256="0" * 64)
+    HANDLERS["layout"].run(_ctx(settings, client, raw), stale)
+    assert client.hget(KEYS.fragment("site", fragment.id), "state") == "queued"
+    assert not client.exists(KEYS.fragment_layout("site", fragment.id))
+
+
+def test_writes_never_resurrect_a_deleted_fragment(setup, scene: SyntheticScene) -> None:
+    settings, client, raw = setup
+    fragment = scene.fragments[0]
+    _upload(settings, "site", {fragment.id: encode_ply(fragment.points)})
+    sha = client.hget(KEYS.fragment("site", fragment.id), "sha256")
+    _delete(settings, "site", fragment.id)
+    ctx = _ctx(settings, client, raw)
+    assert not update_fragment(ctx, "site", fragment.id, sha, {"state": "done"}, layout="{}")
+    assert not client.exists(KEYS.fragment("site", fragment.id))
+    assert not client.exists(KEYS.fragment_layout("site", fragment.id))
+
+
+def test_layout_past_its_deadline_times_out(setup, scene: SyntheticScene) -> None:
+    settings, client, raw = setup
+    fragment = scene.fragments[0]
+    _upload(settings, "site", {fragment.id: encode_ply(fragment.points)})
+    job = decode_job(client.xrange(KEYS.jobs)[0][1]["job"])
+    ctx = _ctx(settings, client, raw, deadline=time.monotonic() - 1)
+    with pytest.raises(JobTimeoutError):
+        HANDLERS["layout"].run(ctx, job)
+
+
+def test_older_result_never_overwrites_a_newer_one(setup) -> None:
+    settings, client, raw = setup
+    ctx = _ctx(settings, client, raw)
+    assert store_result(ctx, "site", 5, ResultModel(status="closed"))
+    assert not store_result(ctx, "site", 4, ResultModel(status="open"))
+    assert ResultModel.model_validate_json(client.get(KEYS.result("site"))).status == "closed"
+    assert client.hget(KEYS.site("site"), "result_generation") == "5"
+
+
+def test_placement_waits_for_pending_layouts(setup, scene: SyntheticScene) -> None:
+    settings, client, raw = setup
+    first, second = scene.fragments[:2]
+    _upload(settings, "site", {first.id: encode_ply(first.points)})
+    consumer = _consumer(settings, client, raw)
+    _run_all(consumer)
+    generation = int(client.hget(KEYS.site("site"), "result_generation"))
+    _upload(settings, "site", {second.id: encode_ply(second.points)})
+    # A placement request arrives while the new fragment is still queued: it must wait.
+    client.delete(KEYS.placement_flag("site"))
+    job = PlacementJob(site_id="site")
+    HANDLERS["placement"].run(_ctx(settings, client, raw), job)
+    assert int(client.hget(KEYS.site("site"), "result_generation")) == generation
+    assert client.get(KEYS.placement_flag("site")) is None
+    _run_all(consumer)
+    result = ResultModel.model_validate_json(client.get(KEYS.result("site")))
+    assert [f.id for f in result.fragments] == [first.id, second.id]
+
+
+def test_deleting_every_fragment_clears_the_result(setup, scene: SyntheticScene) -> None:
+    settings, client, raw = setup
+    fragment = scene.fragments[0]
+    _upload(settings, "site", {fragment.id: encode_ply(fragment.points)})
+    consumer = _consumer(settings, client, raw)
+    _run_all(consumer)
+    assert client.exists(KEYS.result("site"))
+    _delete(settings, "site", fragment.id)
+    _run_all(consumer)
+    assert not client.exists(KEYS.result("site"))
+    assert client.hget(KEYS.site("site"), "placement_state") == "idle"

@@ -1,0 +1,223 @@
+"""The two job handlers: a fragment's local layout, and a site's global placement.
+
+Handlers are idempotent: a job delivered twice (at-least-once) finds its work done, or its
+fragment replaced or deleted (``sha256`` mismatch), and changes nothing (see
+:mod:`worker.updates` for the conditional writes).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+import zlib
+from dataclasses import dataclass
+from typing import Protocol, TypeVar
+
+from schemas.jobs import FragmentState, LayoutJob, PlacementJob, PlacementState
+from schemas.layout import LocalLayoutWire
+from schemas.result import FragmentResultModel, ResultModel
+from schemas.service import ErrorDetail
+from services.types import LocalLayout
+from worker.connection import strings
+from worker.jobs import finish_placement, placement_flag_ttl_ms
+from worker.records import error_fields
+from worker.updates import (
+    JobContext,
+    JobTimeoutError,
+    Progress,
+    store_result,
+    update_fragment,
+    update_placement,
+)
+
+__all__ = [
+    "HANDLERS",
+    "Handler",
+    "JobContext",
+    "JobTimeoutError",
+    "LayoutHandler",
+    "PlacementHandler",
+    "Progress",
+]
+
+log = logging.getLogger(__name__)
+
+_PENDING = {FragmentState.QUEUED.value, FragmentState.RUNNING.value}
+
+
+class Handler(Protocol):
+    """One job kind: run it, or record that it failed (``final``: no more tries)."""
+
+    def run(self, ctx: JobContext, job: LayoutJob | PlacementJob) -> None: ...
+
+    def failed(
+        self, ctx: JobContext, job: LayoutJob | PlacementJob, error: ErrorDetail, final: bool
+    ) -> None: ...
+
+
+_J = TypeVar("_J", LayoutJob, PlacementJob)
+
+
+def _expect(job: LayoutJob | PlacementJob, kind: type[_J]) -> _J:
+    if not isinstance(job, kind):
+        raise TypeError(f"{kind.__name__} handler got a {type(job).__name__}")
+    return job
+
+
+class LayoutHandler:
+    """Parse the stored bytes and estimate the fragment's local layout."""
+
+    def run(self, ctx: JobContext, job: LayoutJob | PlacementJob) -> None:
+        job = _expect(job, LayoutJob)
+        from services.parsing import parse_fragment
+        from services.pipeline import estimate_layout
+
+        site, fid, sha = job.site_id, job.fragment_id, job.sha256
+        record = ctx.client.hgetall(ctx.keys.fragment(site, fid))
+        if record.get("sha256") != sha:
+            log.info("layout job %s is stale: fragment %s/%s changed", job.job_id, site, fid)
+            return
+        if record.get("state") == FragmentState.DONE.value:
+            return  # redelivered: the layout and its placement request were written together
+        running = FragmentState.RUNNING.value
+        fields = {"state": running, "stage": "decode", "progress": "0", "tries": str(ctx.tries)}
+        if not update_fragment(ctx, site, fid, sha, fields):
+            return
+        blob = ctx.raw.get(ctx.keys.fragment_data(site, fid))
+        if not isinstance(blob, bytes):
+            return
+        parsed = parse_fragment(zlib.decompress(blob), ctx.params.parser)
+        progress = Progress(ctx, site, (fid, sha))
+        layout = estimate_layout(parsed.points, ctx.params, progress=progress)
+        wire = LocalLayoutWire.from_layout(layout).model_dump_json()
+        done = {"state": FragmentState.DONE.value, "stage": "done", "progress": "1"}
+        done.update(error_fields("", ""))
+        update_fragment(ctx, site, fid, sha, done, layout=wire, place=True)
+
+    def failed(
+        self, ctx: JobContext, job: LayoutJob | PlacementJob, error: ErrorDetail, final: bool
+    ) -> None:
+        job = _expect(job, LayoutJob)
+        state = FragmentState.FAILED if final else FragmentState.QUEUED
+        fields = {"state": state.value, "stage": "failed" if final else "retrying"}
+        fields.update(error_fields(error.code, error.message))
+        update_fragment(ctx, job.site_id, job.fragment_id, job.sha256, fields, place=final)
+
+
+@dataclass(frozen=True)
+class _SiteSnapshot:
+    generation: int
+    fragments: list[tuple[str, dict[str, str]]]  # upload order
+    layouts: dict[str, str]  # fragment id -> LocalLayoutWire JSON, of done fragments
+
+
+def _snapshot(ctx: JobContext, site_id: str) -> _SiteSnapshot:
+    keys = ctx.keys
+    generation = int(ctx.client.hget(keys.site(site_id), "generation") or 0)
+    ids = strings(ctx.client.zrange(keys.fragments(site_id), 0, -1))
+    with ctx.client.pipeline(transaction=False) as pipe:
+        for fid in ids:
+            pipe.hgetall(keys.fragment(site_id, fid))
+        for fid in ids:
+            pipe.get(keys.fragment_layout(site_id, fid))
+        replies = pipe.execute()
+    records = replies[: len(ids)]
+    fragments = [(fid, rec) for fid, rec in zip(ids, records, strict=True) if rec]
+    layouts = {
+        fid: raw
+        for fid, rec, raw in zip(ids, records, replies[len(ids) :], strict=True)
+        if rec.get("state") == FragmentState.DONE.value and raw
+    }
+    return _SiteSnapshot(generation, fragments, layouts)
+
+
+def _failed_result(fragments: list[tuple[str, dict[str, str]]]) -> ResultModel:
+    reasons = {fid: rec.get("error_code", "") for fid, rec in fragments}
+    return ResultModel(
+        status="failed",
+        fragments=[FragmentResultModel(id=fid, placed=False) for fid, _ in fragments],
+        diagnostics={"reason": "no fragment has a usable local layout", "errors": reasons},
+    )
+
+
+def _place(ctx: JobContext, site_id: str, snap: _SiteSnapshot) -> ResultModel:
+    from services.pipeline import place_site
+
+    if not snap.layouts:
+        return _failed_result(snap.fragments)
+    layouts: dict[str, LocalLayout] = {
+        fid: LocalLayoutWire.model_validate_json(raw).to_layout()
+        for fid, raw in snap.layouts.items()
+    }
+    result: ResultModel = place_site(layouts, ctx.params, progress=Progress(ctx, site_id, None))
+    return result
+
+
+class PlacementHandler:
+    """Place the site's laid-out fragments; coalesced so one runs per site at a time."""
+
+    def run(self, ctx: JobContext, job: LayoutJob | PlacementJob) -> None:
+        job = _expect(job, PlacementJob)
+        site_id, flag = job.site_id, ctx.keys.placement_flag(job.site_id)
+        holder = ctx.client.get(flag)
+        if holder is not None and holder != job.job_id:
+            log.info("placement job %s superseded by %s", job.job_id, holder)
+            return
+        ctx.client.set(flag, job.job_id, px=placement_flag_ttl_ms(ctx.settings))
+        snap = _snapshot(ctx, site_id)
+        ctx.client.hset(ctx.keys.site(site_id), "placement_generation", str(snap.generation))
+        if any(rec.get("state") in _PENDING for _, rec in snap.fragments):
+            self._wait_for_layouts(ctx, site_id)
+        elif not snap.fragments:
+            self._clear(ctx, site_id)
+        else:
+            update_placement(
+                ctx,
+                site_id,
+                placement_state=PlacementState.RUNNING.value,
+                placement_stage="placement",
+                placement_progress="0",
+                placement_started_at=repr(time.time()),
+            )
+            store_result(ctx, site_id, snap.generation, _place(ctx, site_id, snap))
+        finish_placement(ctx.client, ctx.keys, ctx.settings, job, snap.generation)
+
+    @staticmethod
+    def _wait_for_layouts(ctx: JobContext, site_id: str) -> None:
+        # The pending fragments request a placement when their layout ends.
+        placed = ctx.client.hget(ctx.keys.site(site_id), "result_generation")
+        state = PlacementState.DONE if placed else PlacementState.IDLE
+        update_placement(
+            ctx, site_id, placement_state=state.value, placement_stage="waiting_for_layouts"
+        )
+
+    @staticmethod
+    def _clear(ctx: JobContext, site_id: str) -> None:
+        # Every fragment was deleted: nothing is placed any more.
+        ctx.client.delete(ctx.keys.result(site_id))
+        ctx.client.hdel(
+            ctx.keys.site(site_id),
+            "result_generation",
+            "result_status",
+            "loop_closed",
+            "last_placement_at",
+        )
+        update_placement(
+            ctx, site_id, placement_state=PlacementState.IDLE.value, placement_stage=""
+        )
+
+    def failed(
+        self, ctx: JobContext, job: LayoutJob | PlacementJob, error: ErrorDetail, final: bool
+    ) -> None:
+        job = _expect(job, PlacementJob)
+        state = PlacementState.FAILED if final else PlacementState.QUEUED
+        fields = {"placement_state": state.value, "placement_stage": "failed" if final else ""}
+        update_placement(
+            ctx, job.site_id, **fields, **error_fields(error.code, error.message, "placement_")
+        )
+        if final:
+            started = ctx.client.hget(ctx.keys.site(job.site_id), "placement_generation")
+            finish_placement(ctx.client, ctx.keys, ctx.settings, job, int(started or 0))
+
+
+HANDLERS: dict[str, Handler] = {"layout": LayoutHandler(), "placement": PlacementHandler()}

@@ -1,0 +1,91 @@
+"""Every Redis key and channel name of the service, in one place.
+
+Layout (``P`` is the configured prefix, ``S`` a site id, ``F`` a fragment id; ids match
+``[A-Za-z0-9._-]{1,64}`` so they never contain the ``:`` separator):
+
+========================  ======  =======================================================
+key                       type    holds
+========================  ======  =======================================================
+P:jobs                    stream  pending jobs (consumer group ``workers``)
+P:jobs:dead               stream  dead letters (jobs given up on)
+P:job:ID:tries            string  delivery counter of one job
+P:workers                 zset    worker id -> last heartbeat (unix time)
+P:stats                   hash    job counters and duration histograms
+P:sites                   zset    site id -> creation time
+P:site:S                  hash    site record: generation, placement state, result info
+P:site:S:fragments        zset    fragment id -> upload time (the order of the result)
+P:site:S:frag:F           hash    fragment record: sha256, size, state, stage, progress
+P:site:S:frag:F:data      string  the uploaded file bytes, zlib-compressed
+P:site:S:frag:F:layout    string  LocalLayoutWire JSON
+P:site:S:result           string  ResultModel JSON of the newest placement
+P:site:S:placement        string  id of the one queued/running placement job (with TTL)
+P:site:S:events           pubsub  SiteEvent JSON (fragment, placement, result)
+P:results                 pubsub  ``{"site_id", "generation", "result"}`` per placement
+========================  ======  =======================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["GROUP", "Keys"]
+
+GROUP = "workers"
+
+
+@dataclass(frozen=True)
+class Keys:
+    """Key names under one prefix."""
+
+    prefix: str = "fpj"
+
+    @property
+    def jobs(self) -> str:
+        return f"{self.prefix}:jobs"
+
+    @property
+    def dead(self) -> str:
+        return f"{self.prefix}:jobs:dead"
+
+    def tries(self, job_id: str) -> str:
+        return f"{self.prefix}:job:{job_id}:tries"
+
+    @property
+    def workers(self) -> str:
+        return f"{self.prefix}:workers"
+
+    @property
+    def stats(self) -> str:
+        return f"{self.prefix}:stats"
+
+    @property
+    def sites(self) -> str:
+        return f"{self.prefix}:sites"
+
+    def site(self, site_id: str) -> str:
+        return f"{self.prefix}:site:{site_id}"
+
+    def fragments(self, site_id: str) -> str:
+        return f"{self.prefix}:site:{site_id}:fragments"
+
+    def fragment(self, site_id: str, fragment_id: str) -> str:
+        return f"{self.prefix}:site:{site_id}:frag:{fragment_id}"
+
+    def fragment_data(self, site_id: str, fragment_id: str) -> str:
+        return f"{self.fragment(site_id, fragment_id)}:data"
+
+    def fragment_layout(self, site_id: str, fragment_id: str) -> str:
+        return f"{self.fragment(site_id, fragment_id)}:layout"
+
+    def result(self, site_id: str) -> str:
+        return f"{self.prefix}:site:{site_id}:result"
+
+    def placement_flag(self, site_id: str) -> str:
+        return f"{self.prefix}:site:{site_id}:placement"
+
+    def site_channel(self, site_id: str) -> str:
+        return f"{self.prefix}:site:{site_id}:events"
+
+    @property
+    def results_channel(self) -> str:
+        return f"{self.prefix}:results"
