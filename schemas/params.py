@@ -84,7 +84,7 @@ class PlacementParams(_Frozen):
     )
     top_k: int = Field(3, ge=1, description="best placements kept (runners-up in diagnostics)")
     max_search_nodes: int = Field(
-        200_000, ge=1, description="search nodes before the best found so far is returned"
+        30_000, ge=1, description="search nodes before the best found so far is returned"
     )
 
 

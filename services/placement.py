@@ -359,47 +359,56 @@ def _outside_share(search: _Search, state: _State) -> float:
     return total
 
 
-def _lower_bound(search: _Search, state: _State, remaining: Sequence[int]) -> float:
-    """No completion of ``state`` has a lower energy than this.
-
-    Corners: those placed, those inside the pieces left, and one per quarter turn the
-    junctions still owe the loop; hull edges: at least 4; closure: the gap less what the
-    pieces left can span; boundary: each piece left (and the loop's start) is entered at
-    the cheapest junction it has.
-    """
-    w_l, w_c, w_b = search.weights()
-    pieces = search.pieces
-    span = sum(pieces[i].span_l1 for i in remaining)
-    closure = max(0.0, float(np.abs(state.end).sum()) - span)
-    owed = abs(4 - state.turning - sum(pieces[i].turning for i in remaining))
-    if not search.require_closed:
-        owed = 0
-    corners = state.corners + sum(pieces[i].corners for i in remaining) + owed
-    # Each piece left (and the loop's start) is entered from the last placed piece or from
-    # another piece left, at the cheapest turn.
-    sources = (state.order[-1], *remaining)
-    boundary = state.boundary + sum(
-        min(search.cheapest_pair[a][b] for a in sources if a != b) for b in (*remaining, 0)
-    )
-    return w_l * (corners + 4) + w_c * closure + w_b * boundary
-
-
 def _dfs(search: _Search, state: _State, remaining: tuple[int, ...]) -> None:
+    """Expand ``state``: children in order of their lower bound, cut at the bound. Only a
+    child that is visited pays for its geometry (the crossing test)."""
     search.nodes += 1
-    if search.nodes > search.params.max_search_nodes:
-        return
     if not remaining or not search.require_closed:
         # An open search also keeps partial chains: the best one is placed when no
         # arrangement of all pieces exists (walls would cross).
         _close(search, state)
         if not remaining:
             return
-    if _lower_bound(search, state, remaining) >= search.bound():
-        return
+    pieces = search.pieces
+    w_l, w_c, w_b = search.weights()
+    span = sum(pieces[i].span_l1 for i in remaining)
+    turning = state.turning + sum(pieces[i].turning for i in remaining)
+    corners = state.corners + sum(pieces[i].corners for i in remaining)
+    # Cheapest way into each piece left (and into the loop's start) from a piece that can
+    # still precede it: a lower bound for every child at once.
+    sources = (state.order[-1], *remaining)
+    entry = {b: min(search.cheapest_pair[a][b] for a in sources if a != b) for b in (*remaining, 0)}
+    entry_total = sum(entry.values())
+    ranked = []
+    for j, turn in _options(search, state, remaining):
+        piece = pieces[j]
+        rotation = (state.heading + turn - piece.directions[0]) % 4
+        end = state.end + piece.rotated[rotation][0][-1]
+        closure = max(0.0, abs(float(end[0])) + abs(float(end[1])) - (span - piece.span_l1))
+        owed = abs(4 - turning - turn) if search.require_closed else 0
+        joined = state.boundary + search.mismatch[(state.order[-1], j, turn)]
+        bound = (
+            w_l * (corners + (turn != 0) + owed + 4)
+            + w_c * closure
+            + w_b * (joined + entry_total - entry[j])
+        )
+        ranked.append((bound, j, turn))
+    ranked.sort(key=lambda item: item[0])
+    for bound, j, turn in ranked:
+        if bound >= search.bound() or search.nodes >= search.params.max_search_nodes:
+            return
+        child = _extend(search, state, j, turn)
+        if child is not None:
+            _dfs(search, child, tuple(i for i in remaining if i != j))
+
+
+def _options(search: _Search, state: _State, remaining: tuple[int, ...]) -> list[tuple[int, int]]:
+    """(piece, junction turn) pairs allowed next by the user constraints and the turning
+    number of a closed loop."""
     k = len(remaining)
-    options: list[tuple[float, int, int]] = []
     prev = state.order[-1]
     fixed = state.turning + sum(search.pieces[i].turning for i in remaining)
+    options = []
     for j in remaining:
         if search.successor.get(prev, j) != j or search.predecessor.get(j, prev) != prev:
             continue
@@ -407,11 +416,8 @@ def _dfs(search: _Search, state: _State, remaining: tuple[int, ...]) -> None:
             # The loop's turns add up to +4; the k junctions after this one give +-1 each.
             if search.require_closed and abs(4 - fixed - turn) > k:
                 continue
-            options.append((search.mismatch[(prev, j, turn)] + abs(turn), j, turn))
-    for _, j, turn in sorted(options):
-        child = _extend(search, state, j, turn)
-        if child is not None:
-            _dfs(search, child, tuple(i for i in remaining if i != j))
+            options.append((j, turn))
+    return options
 
 
 def _all_mismatches(
