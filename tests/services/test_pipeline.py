@@ -88,3 +88,30 @@ def test_layout_survives_the_wire_format():
     assert np.array_equal(back.source_boundary, layout.source_boundary)
     assert np.array_equal(back.footprint, layout.footprint)
     assert np.array_equal(back.frame.rotation, layout.frame.rotation)
+
+
+def test_two_identical_fragments_give_a_defined_status():
+    scene = small_scene("easy", 0)
+    fragment = scene.fragments[0]
+    layout = estimate_layout(fragment.points)
+    result = place_site({"a": layout, "b": layout})
+    assert result.status in ("open", "closed")
+    assert {f.id for f in result.fragments} == {"a", "b"}
+    ResultModel.model_validate(result.model_dump())
+
+
+def test_non_manhattan_room_gives_a_defined_status():
+    # A hexagonal room: walls at 60 degrees to each other.
+    rng = np.random.default_rng(5)
+    angles = np.radians(np.arange(0, 360, 60))
+    corners = 4.0 * np.column_stack([np.cos(angles), np.sin(angles)])
+    walls = []
+    for a, b in zip(corners, np.roll(corners, -1, axis=0), strict=True):
+        t = rng.uniform(0, 1, 6000)[:, None]
+        walls.append(np.column_stack([a + t * (b - a), rng.uniform(0, 2.7, 6000)]))
+    floor = rng.uniform(-3, 3, (20_000, 2))
+    points = np.vstack([*walls, np.column_stack([floor, np.zeros(len(floor))])])
+    halves = {"left": points[points[:, 0] < 0.2], "right": points[points[:, 0] > -0.2]}
+    result = place_site({fid: estimate_layout(p) for fid, p in halves.items()})
+    assert result.status in ("open", "closed", "failed")
+    ResultModel.model_validate(result.model_dump())

@@ -1,0 +1,73 @@
+"""Candidate walls on the projection grid: evidence threshold, boundary test, bridges."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from schemas.params import LayoutParams
+from services.wall_lines import _runs, evidence_threshold, find_wall_lines
+
+pytestmark = pytest.mark.timeout(60)
+
+
+def _box_room(rng: np.random.Generator, furniture: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Thinned-looking points and normals of two walls (y = 0 and x = 6) of a room whose
+    interior is y > 0, x < 6, plus its floor; optionally a free-standing cabinet."""
+    walls = []
+    normals = []
+    x = rng.uniform(0, 6, 6000)
+    z = rng.uniform(0, 2.6, 6000)
+    walls.append(np.column_stack([x, np.zeros_like(x), z]))
+    normals.append(np.tile([0.0, 1.0, 0.0], (6000, 1)))
+    y = rng.uniform(0, 4, 4000)
+    z = rng.uniform(0, 2.6, 4000)
+    walls.append(np.column_stack([np.full_like(y, 6.0), y, z]))
+    normals.append(np.tile([-1.0, 0.0, 0.0], (4000, 1)))
+    floor = np.column_stack([rng.uniform(0, 6, 8000), rng.uniform(0, 4, 8000), np.zeros(8000)])
+    walls.append(floor)
+    normals.append(np.tile([0.0, 0.0, 1.0], (8000, 1)))
+    if furniture:  # a 1.2 m tall cabinet face in the middle of the room
+        fx = rng.uniform(2, 3.5, 1500)
+        fz = rng.uniform(0, 1.2, 1500)
+        walls.append(np.column_stack([fx, np.full_like(fx, 2.0), fz]))
+        normals.append(np.tile([0.0, -1.0, 0.0], (1500, 1)))
+    return np.vstack(walls), np.vstack(normals)
+
+
+def test_finds_both_walls_with_their_interior_side():
+    points, normals = _box_room(np.random.default_rng(0))
+    lines = [
+        ln for ln in find_wall_lines(points, normals, 0.0, 2.6, LayoutParams()) if not ln.virtual
+    ]
+    by_axis = {ln.axis: ln for ln in lines}
+    assert set(by_axis) == {0, 1}
+    assert by_axis[0].offset == pytest.approx(0.0, abs=0.02)
+    assert by_axis[1].offset == pytest.approx(6.0, abs=0.02)
+    # Interior +y for the wall along x: travelled +x. Interior -x for the wall along y:
+    # travelled +y. Both keep the interior on the left.
+    assert by_axis[0].travel == 1
+    assert by_axis[1].travel == 1
+
+
+def test_short_furniture_is_not_a_wall():
+    points, normals = _box_room(np.random.default_rng(1), furniture=True)
+    lines = find_wall_lines(points, normals, 0.0, 2.6, LayoutParams())
+    assert not any(ln.axis == 0 and abs(ln.offset - 2.0) < 0.1 for ln in lines)
+
+
+def test_threshold_follows_room_height_and_sensor_density():
+    params = LayoutParams()
+    dense = np.full(100, 40, dtype=np.int64)
+    assert evidence_threshold(dense, band=2.4, params=params) == 15  # half the band: 1.2 m
+    assert evidence_threshold(dense, band=3.5, params=params) == 20  # the paper's N
+    sparse = np.full(100, 8, dtype=np.int64)  # a 16-ring LiDAR fills few height bins
+    assert evidence_threshold(sparse, band=2.8, params=params) == 4
+    assert evidence_threshold(np.zeros(0, dtype=np.int64), band=10.0, params=params) == 20
+
+
+def test_runs_bridge_small_gaps_and_drop_short_runs():
+    mask = np.array([1, 1, 0, 1, 1, 0, 0, 0, 1, 1, 1, 1, 0, 1], dtype=bool)
+    assert _runs(mask, max_gap=2, min_len=3) == [(0, 5), (8, 14)]
+    assert _runs(mask, max_gap=0, min_len=3) == [(8, 12)]
+    assert _runs(np.zeros(5, dtype=bool), 2, 3) == []
