@@ -18,7 +18,7 @@ def _line(axis: int, offset: float, travel: int, spans: list[tuple[float, float]
     origin = -2.0
     high = np.zeros(int(14.0 / CELL), dtype=bool)
     for lo, hi in spans:
-        high[int(round((lo - origin) / CELL)) : int(round((hi - origin) / CELL))] = True
+        high[round((lo - origin) / CELL) : round((hi - origin) / CELL)] = True
     return WallLine(axis, offset, travel, origin, CELL, high, np.array(spans, dtype=np.float64))
 
 
