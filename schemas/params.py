@@ -116,3 +116,4 @@ class PipelineParams(_Frozen):
     manhattan: ManhattanParams = ManhattanParams()
     layout: LayoutParams = LayoutParams()
     placement: PlacementParams = PlacementParams()
+    registration: RegistrationParams = RegistrationParams()

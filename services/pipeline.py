@@ -24,9 +24,10 @@ from services.layout_model import build_polygon
 from services.local_layout import estimate_local_layout
 from services.placement import Placement, make_piece, place_pieces, rot90
 from services.refinement import Refinement, refine_translations
+from services.registration import premerge
 from services.types import FloatArray, LocalLayout
 
-__all__ = ["ProgressFn", "estimate_layout", "fragment_pose", "place_site"]
+__all__ = ["ProgressFn", "align_clouds", "estimate_layout", "fragment_pose", "place_site"]
 
 ProgressFn = Callable[[str, float], None]
 
@@ -163,4 +164,70 @@ def place_site(
         diagnostics=_diagnostics(
             placement, refined.status, (refined.violation_before, refined.violation_after)
         ),
+    )
+
+
+def align_clouds(
+    clouds: Mapping[str, FloatArray],
+    params: PipelineParams = PipelineParams(),
+    progress: ProgressFn | None = None,
+    premerge_overlapping: bool = False,
+) -> ResultModel:
+    """The whole pipeline on in-memory fragments (the CLI's ``align``).
+
+    With ``premerge_overlapping``, fragments whose FPFH registration has more than the
+    configured share of inliers are first merged (paper section 3); every input fragment
+    still gets its own pose (the group's pose composed with its registration).
+
+    Parameters
+    ----------
+    clouds : id -> (N, 3) float64, fragment-local points, meters.
+    params : algorithm parameters.
+    progress : optional callback ``(stage, fraction)``.
+    premerge_overlapping : run the FPFH pre-merge first.
+    """
+    report = progress or (lambda stage, fraction: None)
+    groups: dict[str, dict[str, FloatArray]] = {fid: {fid: np.eye(4)} for fid in clouds}
+    merged: Mapping[str, FloatArray] = clouds
+    if premerge_overlapping and len(clouds) > 1:
+        report("pre-merge", 0.0)
+        result = premerge(clouds, params.registration)
+        groups = {g.anchor_id: dict(g.transforms) for g in result.groups}
+        merged = {g.anchor_id: g.points for g in result.groups}
+    layouts = {}
+    for index, (gid, points) in enumerate(merged.items()):
+        report(f"local layout {gid}", index / max(len(merged), 1))
+        layouts[gid] = estimate_layout(points, params)
+    report("placement", 0.9)
+    placed = place_site(layouts, params)
+    return _expand_groups(placed, groups, list(clouds))
+
+
+def _expand_groups(
+    result: ResultModel, groups: Mapping[str, Mapping[str, FloatArray]], order: Sequence[str]
+) -> ResultModel:
+    """One result entry per input fragment: members inherit their group's placement."""
+    by_group = {f.id: f for f in result.fragments}
+    fragments = {}
+    for gid, members in groups.items():
+        entry = by_group[gid]
+        for fid, to_anchor in members.items():
+            back = np.linalg.inv(to_anchor)
+            keypoints = np.asarray(entry.local_layout.keypoints, dtype=np.float64).reshape(-1, 3)
+            local = keypoints @ back[:3, :3].T + back[:3, 3]
+            pose = None if entry.pose is None else (np.asarray(entry.pose) @ to_anchor).tolist()
+            fragments[fid] = entry.model_copy(
+                update={
+                    "id": fid,
+                    "pose": pose,
+                    "local_layout": LocalLayoutModel(keypoints=local.tolist()),
+                    "merged_into": gid if fid != gid else None,
+                }
+            )
+    closed = result.status == "closed" and all(f.placed for f in fragments.values())
+    return result.model_copy(
+        update={
+            "status": "closed" if closed else result.status,
+            "fragments": [fragments[fid] for fid in order],
+        }
     )

@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from schemas.layout import LocalLayoutWire
+from schemas.params import PipelineParams, RegistrationParams
 from schemas.result import ResultModel
 from services.evaluation import evaluate_result
-from services.pipeline import estimate_layout, place_site
+from services.pipeline import align_clouds, estimate_layout, place_site
 from services.synthetic import ground_truth_json
 from tests.conftest import small_scene
 
@@ -115,3 +116,29 @@ def test_non_manhattan_room_gives_a_defined_status():
     result = place_site({fid: estimate_layout(p) for fid, p in halves.items()})
     assert result.status in ("open", "closed", "failed")
     ResultModel.model_validate(result.model_dump())
+
+
+def test_premerge_gives_every_input_fragment_a_pose():
+    scene = small_scene("easy", 2, 40_000)
+    first = scene.fragments[0]
+    rng = np.random.default_rng(7)
+    angle = 0.4
+    moved = np.eye(4)
+    moved[:3, :3] = [
+        [np.cos(angle), -np.sin(angle), 0],
+        [np.sin(angle), np.cos(angle), 0],
+        [0, 0, 1],
+    ]
+    moved[:3, 3] = [1.5, -0.7, 0.2]
+    subset = first.points[rng.random(len(first.points)) < 0.8]
+    copy = subset @ moved[:3, :3].T + moved[:3, 3]  # the same scan, seen in another frame
+    clouds = {f.id: f.points for f in scene.fragments}
+    clouds["copy"] = copy
+    params = PipelineParams(registration=RegistrationParams(voxel_size=0.1))
+    result = align_clouds(clouds, params, premerge_overlapping=True)
+    by_id = {f.id: f for f in result.fragments}
+    assert set(by_id) == set(clouds)
+    assert by_id["copy"].placed and by_id["copy"].pose is not None
+    # copy-local -> first-local is inv(moved); both poses must agree on that.
+    expected = np.array(by_id[first.id].pose) @ np.linalg.inv(moved)
+    assert np.allclose(np.array(by_id["copy"].pose), expected, atol=0.05)
