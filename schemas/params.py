@@ -79,6 +79,12 @@ class PlacementParams(_Frozen):
     )
     boundary_sigma: float = Field(0.10, gt=0, description="sigma of the mismatch CDF, m")
     min_boundary_points: int = Field(50, ge=1)
+    closure_overshoot: float = Field(
+        1.5,
+        gt=0,
+        description="how far the loop's last wall may run past its start before the loop "
+        "is refined (neighbouring scans overlap; the overlaps add up around the loop), m",
+    )
     closure_tolerance: float = Field(
         0.05, gt=0, description="largest gap left in the loop after refinement, m"
     )

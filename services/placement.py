@@ -260,7 +260,7 @@ def _crosses(new: FloatArray, placed: FloatArray) -> bool:
 
 def _trim_start(walls: FloatArray, start: FloatArray, length: float) -> FloatArray:
     """Shorten the loop's first wall at its start: the closing piece may overshoot it by
-    up to the closure tolerance (neighbouring scans overlap) without crossing it."""
+    up to ``length`` (neighbouring scans overlap) without counting as a crossing."""
     out = walls.copy()
     axis, _, lo, hi = out[0]
     run = start[0] if axis == 0 else start[1]
@@ -444,7 +444,7 @@ def _root(first: Piece, params: PlacementParams) -> _State:
         turning=first.turning,
         corners=first.corners,
         boundary=0.0,
-        walls=_trim_start(_walls(first.keypoints), first.keypoints[0], params.closure_tolerance),
+        walls=_trim_start(_walls(first.keypoints), first.keypoints[0], params.closure_overshoot),
         vertices=first.keypoints.copy(),
     )
 

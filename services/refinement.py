@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import osqp
+from numpy.typing import NDArray
 from scipy import sparse
 
 from services.placement import Piece, rot90
@@ -27,6 +28,8 @@ from services.types import FloatArray
 __all__ = ["Refinement", "refine_translations"]
 
 _MARGIN = 1e-3  # m, turns the paper's strict inequalities into solvable ones
+_OFFSET_SLACK = 0.10  # m, largest offset mismatch left between walls joined in parallel
+_OFFSET_WEIGHT = 10.0  # weight of that mismatch against the joints' distance
 _UNIT = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
 
 
@@ -47,23 +50,38 @@ class Refinement:
     violation_after: float
 
 
+@dataclass(frozen=True)
+class _Problem:
+    """Least squares J t ~ g (weighted rows) and constraints l <= A t <= u.
+
+    ``ordering`` marks the no-overrun / no-crossing rows, dropped in the relaxed retry.
+    """
+
+    J: FloatArray
+    g: FloatArray
+    A: FloatArray
+    lo: FloatArray
+    hi: FloatArray
+    ordering: NDArray[np.bool_]
+
+
 def _junction_rows(
     sites: list[FloatArray], pieces: Sequence[Piece], rotations: Sequence[int], n: int
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Objective (as least squares J t = g) and constraints l <= A t <= u."""
+) -> _Problem:
+    """The QP's rows: joints pulled together, walls joined in parallel made collinear (a
+    heavily weighted term, within a small slack: measured walls never close a loop
+    exactly), and the paper's no-overrun and no-crossing inequalities."""
     dim = 2 * n
-    j_rows, g_vals, a_rows, lows, highs = [], [], [], [], []
+    j_rows: list[FloatArray] = []
+    g_vals: list[float] = []
+    a_rows: list[FloatArray] = []
+    bounds: list[tuple[float, float, bool]] = []
     for i in range(n):
         k = (i + 1) % n
         q, q_prev = sites[i][-1], sites[i][-2]
         p, p_next = sites[k][0], sites[k][1]
         d_i = _UNIT[(pieces[i].directions[-1] + rotations[i]) % 4]
         d_k = _UNIT[(pieces[k].directions[0] + rotations[k]) % 4]
-        for axis in (0, 1):
-            row = np.zeros(dim)
-            row[2 * i + axis], row[2 * k + axis] = 1.0, -1.0
-            j_rows.append(row)
-            g_vals.append(p[axis] - q[axis])
 
         def diff(vec: FloatArray, i: int = i, k: int = k) -> FloatArray:
             """Row of vec . (t_k - t_i)."""
@@ -72,60 +90,51 @@ def _junction_rows(
             row[2 * i : 2 * i + 2] -= vec
             return row
 
+        for axis in np.eye(2):
+            j_rows.append(-diff(axis))
+            g_vals.append(float(axis @ (p - q)))
         if np.allclose(d_i, d_k):
             normal = np.array([-d_i[1], d_i[0]])
-            a_rows.append(diff(normal))  # offsets equal
-            lows.append(normal @ (q - p))
-            highs.append(normal @ (q - p))
+            target = float(normal @ (q - p))
+            j_rows.append(-_OFFSET_WEIGHT * diff(normal))
+            g_vals.append(-_OFFSET_WEIGHT * target)
+            a_rows.append(diff(normal))  # offsets equal, within the slack
+            bounds.append((target - _OFFSET_SLACK, target + _OFFSET_SLACK, False))
             longest = max(np.linalg.norm(q - q_prev), np.linalg.norm(p_next - p))
             a_rows.append(diff(d_i))  # no overrun
-            lows.append(longest + _MARGIN - d_i @ (p_next - q_prev))
-            highs.append(np.inf)
+            bounds.append((float(longest + _MARGIN - d_i @ (p_next - q_prev)), np.inf, True))
         elif abs(d_i @ d_k) < 0.5:
             a_rows.append(diff(d_i))  # q stays before the next wall's line
-            lows.append(d_i @ (q - p) + _MARGIN)
-            highs.append(np.inf)
+            bounds.append((float(d_i @ (q - p) + _MARGIN), np.inf, True))
             a_rows.append(diff(d_k))  # p starts past this wall's line
-            lows.append(d_k @ (q - p) + _MARGIN)
-            highs.append(np.inf)
-    return (np.array(j_rows), np.array(g_vals), np.array(a_rows), np.array(lows), np.array(highs))
+            bounds.append((float(d_k @ (q - p) + _MARGIN), np.inf, True))
+    gauge = np.zeros((2, dim))
+    gauge[0, 0] = gauge[1, 1] = 1.0  # the first piece does not move
+    lows = [b[0] for b in bounds] + [0.0, 0.0]
+    highs = [b[1] for b in bounds] + [0.0, 0.0]
+    return _Problem(
+        J=np.array(j_rows),
+        g=np.array(g_vals),
+        A=np.vstack([np.array(a_rows).reshape(-1, dim), gauge]),
+        lo=np.array(lows),
+        hi=np.array(highs),
+        ordering=np.array([b[2] for b in bounds] + [False, False], dtype=bool),
+    )
 
 
-def refine_translations(
-    pieces: Sequence[Piece], rotations: Sequence[int], translations: FloatArray
-) -> Refinement:
-    """Refine the placement's translations with the constrained QP.
-
-    Parameters
-    ----------
-    pieces : pieces in loop order.
-    rotations : quarter turns per piece, loop order.
-    translations : (n, 2) site position of each piece's source from the placement.
-    """
-    n = len(pieces)
-    sites = [
-        p.keypoints @ rot90(r).T + t
-        for p, r, t in zip(pieces, rotations, translations, strict=True)
-    ]
-    if n < 2:
-        return Refinement(translations.copy(), "solved", 0.0, 0.0)
-    J, g, A, lo, hi = _junction_rows(sites, pieces, rotations, n)
-    before = _violation(A, lo, hi, np.zeros(2 * n))
-    # Gauge: the first piece does not move.
-    gauge = np.zeros((2, 2 * n))
-    gauge[0, 0] = gauge[1, 1] = 1.0
-    A = np.vstack([A, gauge]) if len(A) else gauge
-    lo = np.concatenate([lo, [0.0, 0.0]])
-    hi = np.concatenate([hi, [0.0, 0.0]])
-    P = sparse.csc_matrix(J.T @ J + 1e-9 * np.eye(2 * n))
-    q = -J.T @ g
+def _solve(problem: _Problem, keep: NDArray[np.bool_]) -> tuple[str, FloatArray | None]:
+    """OSQP on the rows in ``keep``; the status is checked (an unsolved x is meaningless)."""
+    dim = problem.J.shape[1]
+    P = sparse.csc_matrix(problem.J.T @ problem.J + 1e-9 * np.eye(dim))
+    if not (np.all(np.isfinite(problem.J)) and np.all(np.isfinite(problem.g))):
+        return "invalid input (non-finite)", None
     solver = osqp.OSQP()
     solver.setup(
         P,
-        q,
-        sparse.csc_matrix(A),
-        lo,
-        hi,
+        -problem.J.T @ problem.g,
+        sparse.csc_matrix(problem.A[keep]),
+        problem.lo[keep],
+        problem.hi[keep],
         verbose=False,
         eps_abs=1e-7,
         eps_rel=1e-7,
@@ -135,12 +144,50 @@ def refine_translations(
     result = solver.solve()
     status = str(result.info.status)
     if status not in ("solved", "solved inaccurate") or result.x is None:
-        return Refinement(translations.copy(), f"fallback: {status}", before, before)
-    x = np.asarray(result.x, dtype=np.float64)
-    return Refinement(translations + x.reshape(n, 2), "solved", before, _violation(A, lo, hi, x))
+        return status, None
+    return status, np.asarray(result.x, dtype=np.float64)
 
 
-def _violation(A: FloatArray, lo: FloatArray, hi: FloatArray, x: FloatArray) -> float:
-    """Largest amount by which A x leaves [lo, hi]; the gauge rows are included."""
-    ax = A @ x
-    return float(max(0.0, np.max(lo - ax), np.max(ax - hi)))
+def refine_translations(
+    pieces: Sequence[Piece], rotations: Sequence[int], translations: FloatArray
+) -> Refinement:
+    """Refine the placement's translations with the constrained QP.
+
+    When the paper's inequalities cannot all hold (measured wall lengths that do not fit
+    the loop), the QP is solved again without them and the status says "relaxed"; when
+    that fails too, the unrefined placement is kept and the status says "fallback".
+
+    Parameters
+    ----------
+    pieces : pieces in loop order.
+    rotations : quarter turns per piece, loop order.
+    translations : (n, 2) site position of each piece's source from the placement.
+    """
+    n = len(pieces)
+    if n < 2:
+        return Refinement(translations.copy(), "solved", 0.0, 0.0)
+    sites = [
+        p.keypoints @ rot90(r).T + t
+        for p, r, t in zip(pieces, rotations, translations, strict=True)
+    ]
+    problem = _junction_rows(sites, pieces, rotations, n)
+    everything = np.ones(len(problem.lo), dtype=bool)
+    before = _violation(problem, everything, np.zeros(2 * n))
+    status, x = _solve(problem, everything)
+    label = "solved"
+    if x is None:
+        relaxed = ~problem.ordering
+        status, x = _solve(problem, relaxed)
+        label = "relaxed: junction inequalities dropped"
+        if x is None:
+            return Refinement(translations.copy(), f"fallback: {status}", before, before)
+        after = _violation(problem, relaxed, x)
+    else:
+        after = _violation(problem, everything, x)
+    return Refinement(translations + x.reshape(n, 2), label, before, after)
+
+
+def _violation(problem: _Problem, keep: NDArray[np.bool_], x: FloatArray) -> float:
+    """Largest amount by which the kept rows of A x leave [lo, hi] (gauge included)."""
+    ax = problem.A[keep] @ x
+    return float(max(0.0, np.max(problem.lo[keep] - ax), np.max(ax - problem.hi[keep])))
