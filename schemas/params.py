@@ -56,7 +56,7 @@ class LayoutParams(_Frozen):
     boundary_band: float = Field(0.10, gt=0, description="half-width of the boundary band, m")
     min_wall_cells: int = Field(3, ge=1, description="shortest candidate wall segment, cells")
     source_target: Literal["evidence", "spanning_forest"] = Field(
-        "spanning_forest",
+        "evidence",
         description="how the chain's ends are chosen: the pair whose min-cost path covers the "
         "most wall for its cost, or the paper's longest path in the ST-graph's spanning forest",
     )

@@ -22,7 +22,8 @@ __all__ = ["WallChain", "find_wall_chain"]
 
 _CORNER_REACH = 2.0  # m, how far past a segment's end a deduced corner may lie
 _OCCLUSION_REACH = 3.0  # m, longest gap the ST-graph links across on one line
-_COST_METERS = 1.0  # meters of covered wall worth one unit of path cost
+_CORNER_METERS = 0.5  # covered wall a corner must add to be worth it, m
+_COST_METERS = 0.1  # tie-break: meters of covered wall per unit of path cost
 _SNAP_CELLS = 2.0  # a segment end this close to a deduced corner is merged into it
 
 
@@ -183,13 +184,20 @@ def _forest_path(we: csr_matrix, st: csr_matrix) -> tuple[list[int], float] | No
     return min(found, key=lambda pc: pc[1]) if found else None
 
 
-def _best_path(we: csr_matrix, cover: FloatArray) -> tuple[list[int], float] | None:
+def _best_path(
+    we: csr_matrix, cover: FloatArray, points: FloatArray
+) -> tuple[list[int], float] | None:
     """The directed min-cost path that explains the most wall.
 
-    Over every source and target: covered high-evidence length minus the path cost (one
-    cost unit = one meter). The paper takes the two ends of the longest path in a spanning
-    forest of the candidate keypoints; with clutter that forest shortcuts through spurious
-    corners, so here the evidence itself picks the ends.
+    Over every source and target of the min-cost paths: covered high-evidence length,
+    less a price per corner (a spurious extension through a deduced corner adds little
+    wall), less a small share of the path cost as a tie-break. A gap in a straight wall (a
+    door) costs nothing here, so a chain is not cut short before the last stretch of wall.
+    The paper instead takes the two ends of the longest path in a spanning forest of the
+    keypoints (``source_target="spanning_forest"``); with clutter that forest shortcuts
+    through spurious corners.
+
+    points: (n, 2) node coordinates, to tell where a path turns.
     """
     n = we.shape[0]
     if n < 2:
@@ -197,14 +205,24 @@ def _best_path(we: csr_matrix, cover: FloatArray) -> tuple[list[int], float] | N
     dist, pred = dijkstra(we, directed=True, return_predecessors=True)
     best: tuple[float, int, int] | None = None
     for source in range(n):
-        # Covered length along the shortest-path tree, filled in order of distance.
+        # Covered length and turns along the shortest-path tree, in order of distance.
         covered = np.zeros(n)
+        turns = np.zeros(n)
+        axis = np.full(n, -1)
         for node in np.argsort(dist[source]):
             parent = pred[source, node]
             if parent < 0 or not np.isfinite(dist[source, node]):
                 continue
+            step = np.abs(points[node] - points[parent])
+            axis[node] = int(step[1] > step[0])
             covered[node] = covered[parent] + cover[parent, node]
-        score = covered - _COST_METERS * np.where(np.isfinite(dist[source]), dist[source], np.inf)
+            turns[node] = turns[parent] + (axis[parent] >= 0 and axis[parent] != axis[node])
+        finite = np.isfinite(dist[source])
+        score = np.where(
+            finite,
+            covered - _CORNER_METERS * turns - _COST_METERS * np.where(finite, dist[source], 0),
+            -np.inf,
+        )
         score[source] = -np.inf
         target = int(np.argmax(score))
         if np.isfinite(score[target]) and (best is None or score[target] > best[0]):
@@ -249,7 +267,7 @@ def find_wall_chain(lines: list[WallLine], params: LayoutParams) -> WallChain | 
     if params.source_target == "spanning_forest":
         found = _forest_path(we, st)
     else:
-        found = _best_path(we, cover)
+        found = _best_path(we, cover, np.asarray(nodes.points))
     if found is None:
         return None
     order, cost = found

@@ -36,8 +36,8 @@ def test_acc_local_on_paper_like_scenes():
     assert _accuracy("paper", range(4)) >= 0.9
 
 
-def test_evidence_rule_for_chain_ends_also_works():
-    params = PipelineParams(layout=LayoutParams(source_target="evidence"))
+def test_papers_spanning_forest_rule_for_chain_ends_also_works():
+    params = PipelineParams(layout=LayoutParams(source_target="spanning_forest"))
     assert _accuracy("paper", range(2), params) >= 0.85
 
 
