@@ -89,6 +89,9 @@ class PlacementParams(_Frozen):
         0.05, gt=0, description="largest gap left in the loop after refinement, m"
     )
     top_k: int = Field(3, ge=1, description="best placements kept (runners-up in diagnostics)")
+    max_search_seconds: float = Field(
+        5.0, gt=0, description="search time before the best found so far is returned, s"
+    )
     max_search_nodes: int = Field(
         30_000, ge=1, description="search nodes before the best found so far is returned"
     )

@@ -16,6 +16,7 @@ shrink by as much as the pieces still to place can span.
 from __future__ import annotations
 
 import heapq
+import time
 import itertools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -201,8 +202,18 @@ class _Search:
     require_closed: bool
     cheapest_pair: list[list[float]] = field(default_factory=list)
     top: list[tuple[float, int, PlacementCandidate]] = field(default_factory=list)
+    deadline: float = float("inf")
+    truncated: bool = False
     nodes: int = 0
     counter: itertools.count[int] = field(default_factory=itertools.count)
+
+    def out_of_budget(self) -> bool:
+        """True once the node or time budget is spent (the best so far is then returned)."""
+        if self.nodes >= self.params.max_search_nodes:
+            self.truncated = True
+        elif self.nodes % 256 == 0 and time.monotonic() > self.deadline:
+            self.truncated = True
+        return self.truncated
 
     def weights(self) -> tuple[float, float, float]:
         p = self.params
@@ -317,19 +328,20 @@ def _close(search: _Search, state: _State) -> None:
     closure = float(np.abs(state.end).sum())
     closing = search.mismatch.get((state.order[-1], 0, turn), 1.0)
     boundary = state.boundary + closing
-    if len(state.order) < len(search.pieces):
+    missing = len(search.pieces) - len(state.order)
+    if missing:
         # A partial chain (open search): nothing closes, so no closing junction to score.
         corners, closure, boundary = state.corners, 0.0, state.boundary
+    penalty = _UNPLACED_PENALTY * missing
     # The hull has at least 4 edges: skip computing it when even that cannot win.
-    if w_l * (corners + 4) + w_c * closure + w_b * boundary >= search.bound():
+    if w_l * (corners + 4) + w_c * closure + w_b * boundary + penalty >= search.bound():
         return
     complexity = corners + _hull_edges(state.vertices)
-    energy = w_l * complexity + w_c * closure + w_b * boundary
+    energy = w_l * complexity + w_c * closure + w_b * boundary + penalty
     free_space = 0.0
-    if search.params.use_free_space and energy < search.bound():
+    if search.params.use_free_space and not missing and energy < search.bound():
         free_space = _outside_share(search, state)
         energy += search.params.free_space_weight * free_space
-    energy += _UNPLACED_PENALTY * (len(search.pieces) - len(state.order))
     ids = tuple(search.pieces[i].id for i in state.order)
     search.record(
         PlacementCandidate(energy, ids, state.rotations, complexity, closure, boundary, free_space)
@@ -395,7 +407,7 @@ def _dfs(search: _Search, state: _State, remaining: tuple[int, ...]) -> None:
         ranked.append((bound, j, turn))
     ranked.sort(key=lambda item: item[0])
     for bound, j, turn in ranked:
-        if bound >= search.bound() or search.nodes >= search.params.max_search_nodes:
+        if bound >= search.bound() or search.out_of_budget():
             return
         child = _extend(search, state, j, turn)
         if child is not None:
@@ -499,6 +511,7 @@ def place_pieces(
     for require_closed in (True, False):
         search = _Search(list(pieces), params, mismatch, successor, predecessor, require_closed)
         search.cheapest_pair = _cheapest_pairs(mismatch, n)
+        search.deadline = time.monotonic() + params.max_search_seconds
         _dfs(search, root, tuple(range(1, n)))
         nodes += search.nodes
         if search.top:
@@ -512,7 +525,7 @@ def place_pieces(
         translations=_translations(pieces, best),
         alternatives=tuple(ranked[1:]),
         nodes_searched=nodes,
-        exhaustive=search.nodes <= params.max_search_nodes,
+        exhaustive=not search.truncated,
         closed=require_closed,
     )
 
