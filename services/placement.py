@@ -16,8 +16,8 @@ shrink by as much as the pieces still to place can span.
 from __future__ import annotations
 
 import heapq
-import time
 import itertools
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -209,9 +209,9 @@ class _Search:
 
     def out_of_budget(self) -> bool:
         """True once the node or time budget is spent (the best so far is then returned)."""
-        if self.nodes >= self.params.max_search_nodes:
-            self.truncated = True
-        elif self.nodes % 256 == 0 and time.monotonic() > self.deadline:
+        if self.nodes >= self.params.max_search_nodes or (
+            self.nodes % 256 == 0 and time.monotonic() > self.deadline
+        ):
             self.truncated = True
         return self.truncated
 
