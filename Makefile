@@ -18,6 +18,7 @@ install: $(STAMP)
 
 demo: $(STAMP)
 	$(BIN)/jigsaw demo --out out/demo
+	$(BIN)/jigsaw demo --service --out out/demo
 
 test: $(STAMP)
 	bash scripts/test.sh

@@ -11,6 +11,7 @@ from api.backend import Backend
 from api.deps import require_token
 from api.errors import install_error_handlers
 from api.routers import events, fragments, health, metrics, sites
+from api.zenoh import zenoh_front_end
 from schemas.settings import Settings, get_settings
 
 __all__ = ["create_app"]
@@ -34,7 +35,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         backend = await Backend.connect(settings)
         app.state.backend = backend
         try:
-            yield
+            async with zenoh_front_end(backend):  # off with FPJ_ZENOH_LISTEN=none
+                yield
         finally:
             await backend.aclose()
 

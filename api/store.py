@@ -9,6 +9,7 @@ import redis
 
 from api.backend import Backend
 from api.errors import FragmentNotFoundError
+from api.zenoh.presence import load_site_robots
 from schemas.service import FragmentStatus, SiteList, SiteStatus, SiteSummary
 from worker.connection import abort_watch, begin_multi, record, strings
 from worker.jobs import request_placement_async
@@ -33,7 +34,8 @@ async def site_exists(backend: Backend, site_id: str) -> bool:
 
 
 async def load_site_status(backend: Backend, site_id: str) -> SiteStatus:
-    """The status of every fragment (upload order) and of the site's placement."""
+    """The status of every fragment (upload order), of the site's placement, and the robots
+    connected over zenoh with the fragments each sent."""
     keys, r = backend.keys, backend.redis
     ids = strings(await r.zrange(keys.fragments(site_id), 0, -1))
     async with r.pipeline(transaction=False) as pipe:
@@ -41,7 +43,9 @@ async def load_site_status(backend: Backend, site_id: str) -> SiteStatus:
         for fid in ids:
             pipe.hgetall(keys.fragment(site_id, fid))
         replies: list[Any] = await pipe.execute()
-    return site_status(site_id, replies[0], list(zip(ids, replies[1:], strict=True)))
+    status = site_status(site_id, replies[0], list(zip(ids, replies[1:], strict=True)))
+    robots = await load_site_robots(backend, site_id, [f.fragment_id for f in status.fragments])
+    return status.model_copy(update={"robots": robots})
 
 
 async def load_fragment(backend: Backend, site_id: str, fragment_id: str) -> FragmentStatus:

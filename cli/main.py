@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Annotated
 
@@ -28,11 +29,24 @@ def layout(paths: PathsArg, output: OutOpt = None) -> None:
 
 
 @app.command()
-def align(paths: PathsArg, output: OutOpt = None) -> None:
+def align(
+    paths: PathsArg,
+    output: OutOpt = None,
+    cloud: Annotated[
+        Path | None, typer.Option(help="also write the aligned point cloud (.ply, coloured)")
+    ] = None,
+    model: Annotated[
+        Path | None, typer.Option(help="also write the 3D layout model (.ply or .gltf)")
+    ] = None,
+    picture: Annotated[
+        Path | None, typer.Option(help="also write a floorplan top view (.svg or .png)")
+    ] = None,
+) -> None:
     """Align fragments into one room: poses, floorplan (result JSON of the contract)."""
+    from cli.exports import ExportTargets
     from cli.pipeline import run_align
 
-    raise typer.Exit(run_align(paths, output))
+    raise typer.Exit(run_align(paths, output, exports=ExportTargets(cloud, model, picture)))
 
 
 @app.command()
@@ -41,8 +55,19 @@ def demo(
         "out/demo"
     ),
     seed: Annotated[int, typer.Option(help="scene seed")] = 7,
+    service: Annotated[
+        bool, typer.Option("--service", help="run it through the real service over HTTP")
+    ] = False,
 ) -> None:
-    """Generate a synthetic scene, run the pipeline and report errors against ground truth."""
+    """Generate a synthetic scene, run the pipeline and report errors against ground truth.
+
+    With --service: start `jigsaw serve` (embedded Redis and workers), upload the fragments
+    over HTTP as several robots would, wait for the loop to close, report, shut down.
+    """
+    if service:
+        from cli.service_demo import run_service_demo
+
+        raise typer.Exit(run_service_demo(out, seed))
     from cli.demo import run_demo
 
     raise typer.Exit(run_demo(out, seed))
@@ -69,6 +94,101 @@ def worker(
     from worker.main import run_worker
 
     raise typer.Exit(run_worker(concurrency))
+
+
+ConnectOpt = Annotated[
+    list[str] | None,
+    typer.Option("--connect", "-e", help="zenoh endpoint of the service or a router (repeatable)"),
+]
+SiteOpt = Annotated[str, typer.Option("--site", "-s", help="site id")]
+
+
+def _robot_id(value: str) -> str:
+    if not re.fullmatch(r"[A-Za-z0-9._-]{1,64}", value):
+        raise typer.BadParameter("1 to 64 characters of [A-Za-z0-9._-]")
+    return value
+
+
+RobotOpt = Annotated[
+    str | None,
+    typer.Option("--robot", parser=_robot_id, help="robot id: liveliness token and fragment tag"),
+]
+
+
+def _zenoh_mode(value: str) -> str:
+    if value not in ("peer", "client"):
+        raise typer.BadParameter("peer or client")
+    return value
+
+
+ModeOpt = Annotated[str, typer.Option(parser=_zenoh_mode, help="zenoh mode: peer or client")]
+ScoutOpt = Annotated[bool, typer.Option("--scout", help="find the service by UDP multicast")]
+PrefixOpt = Annotated[str, typer.Option(help="key expression prefix of the service")]
+TokenOpt = Annotated[str | None, typer.Option(help="bearer token, if the service needs one")]
+TimeoutOpt = Annotated[float, typer.Option(help="seconds to wait for the service and replies")]
+
+
+@app.command()
+def send(
+    files: Annotated[list[Path], typer.Argument(help="PLY/PCD files; fragment id = file stem")],
+    site: SiteOpt,
+    connect: ConnectOpt = None,
+    robot: RobotOpt = None,
+    mode: ModeOpt = "peer",
+    scout: ScoutOpt = False,
+    prefix: PrefixOpt = "fpj",
+    token: TokenOpt = None,
+    timeout: TimeoutOpt = 60.0,
+) -> None:
+    """Send fragments to the service over zenoh (one query each); print each reply."""
+    import sys
+
+    from api.zenoh.client import robot_options, send_fragments
+
+    options = robot_options(
+        connect or ["tcp/127.0.0.1:7447"],
+        mode=mode,
+        scout=scout,
+        prefix=prefix,
+        robot_id=robot,
+        token=token,
+        timeout=timeout,
+    )
+    raise typer.Exit(send_fragments(options, site, files, sys.stdout, sys.stderr))
+
+
+@app.command()
+def watch(
+    site: SiteOpt,
+    connect: ConnectOpt = None,
+    robot: RobotOpt = None,
+    count: Annotated[int | None, typer.Option(help="stop after this many updates")] = None,
+    duration: Annotated[float | None, typer.Option(help="stop after this many seconds")] = None,
+    latest: Annotated[bool, typer.Option(help="first print the latest result's poses")] = True,
+    mode: ModeOpt = "peer",
+    scout: ScoutOpt = False,
+    prefix: PrefixOpt = "fpj",
+    token: TokenOpt = None,
+    timeout: TimeoutOpt = 60.0,
+) -> None:
+    """Print the site's pose updates over zenoh as they arrive (one JSON per line)."""
+    import sys
+
+    from api.zenoh.client import robot_options, watch_poses
+
+    options = robot_options(
+        connect or ["tcp/127.0.0.1:7447"],
+        mode=mode,
+        scout=scout,
+        prefix=prefix,
+        robot_id=robot,
+        token=token,
+        timeout=timeout,
+    )
+    code = watch_poses(
+        options, site, sys.stdout, sys.stderr, count=count, duration=duration, latest=latest
+    )
+    raise typer.Exit(code)
 
 
 if __name__ == "__main__":

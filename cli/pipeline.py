@@ -9,18 +9,29 @@ import json
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
+from time import perf_counter
 from typing import Any
 
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
+from cli.exports import ExportTargets, write_exports
 from schemas.params import PipelineParams
+from schemas.result import ResultModel
 from services.errors import JigsawError
 from services.parsing import parse_fragment
 from services.pipeline import estimate_layout, place_site
 from services.types import FloatArray, LocalLayout
 
-__all__ = ["collect_paths", "read_fragments", "run_align", "run_layout"]
+__all__ = [
+    "AlignRun",
+    "align_fragments",
+    "collect_paths",
+    "read_fragments",
+    "run_align",
+    "run_layout",
+]
 
 EXIT_OK, EXIT_INTERNAL, EXIT_NO_INPUT = 0, 1, 2
 _SUFFIXES = (".ply", ".pcd")
@@ -109,18 +120,71 @@ def run_layout(paths: list[Path], output: Path | None, params: PipelineParams | 
     return EXIT_OK
 
 
-def run_align(paths: list[Path], output: Path | None, params: PipelineParams | None = None) -> int:
-    """``jigsaw align``: the contract's result JSON. Returns the exit code."""
+@dataclass(frozen=True)
+class AlignRun:
+    """What one in-process alignment produced.
+
+    layouts: id -> local layout; result: the contract's result; seconds: wall time per stage
+    ("local_layout", "global" = placement + refinement, and its split "placement" /
+    "refinement" when the orchestrator reported those stages).
+    """
+
+    layouts: dict[str, LocalLayout]
+    result: ResultModel
+    seconds: dict[str, float]
+
+
+def align_fragments(clouds: dict[str, FloatArray], params: PipelineParams) -> AlignRun:
+    """Local layouts of all clouds, then the global placement; timed per stage.
+
+    The stages of :func:`services.pipeline.align_clouds` without the pre-merge, keeping the
+    layouts (for pictures) and the time of each stage.
+    """
+    start = perf_counter()
+    layouts = _layouts(clouds, params)
+    middle = perf_counter()
+    marks: dict[str, float] = {}
+
+    def mark(stage: str, _fraction: float) -> None:
+        marks.setdefault(stage, perf_counter())
+
+    result = place_site(layouts, params, mark)
+    end = perf_counter()
+    seconds = {"local_layout": middle - start, "global": end - middle}
+    if "placement" in marks and "refinement" in marks:
+        seconds["placement"] = marks["refinement"] - middle
+        seconds["refinement"] = end - marks["refinement"]
+    return AlignRun(layouts, result, seconds)
+
+
+def run_align(
+    paths: list[Path],
+    output: Path | None,
+    params: PipelineParams | None = None,
+    exports: ExportTargets | None = None,
+) -> int:
+    """``jigsaw align``: the contract's result JSON, plus optional exports. Returns the exit
+    code."""
     params = params or PipelineParams()
+    exports = exports or ExportTargets()
+    if problems := exports.problems():
+        print("\n".join(f"error: {p}" for p in problems), file=sys.stderr)
+        return EXIT_NO_INPUT
     clouds = read_fragments(paths, params)
     if not clouds:
         print("error: no usable fragment", file=sys.stderr)
         return EXIT_NO_INPUT
     try:
-        layouts = _layouts(clouds, params)
-        result = place_site(layouts, params)
+        run = align_fragments(clouds, params)
     except Exception as exc:  # an internal failure must still end with a message and code 1
         print(f"internal error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return EXIT_INTERNAL
-    _write_json(result.model_dump(mode="json"), output)
+    _write_json(run.result.model_dump(mode="json"), output)
+    try:
+        notes = write_exports(exports, clouds, run.result)
+    except OSError as exc:
+        print(f"{exc.filename or 'export'}: cannot write: {exc.strerror or exc}", file=sys.stderr)
+        return EXIT_INTERNAL
+    for note in notes:
+        print(note, file=sys.stderr)
     return EXIT_OK

@@ -21,6 +21,7 @@ __all__ = [
     "PendingReply",
     "PlacementStatus",
     "ReadyReply",
+    "RobotStatus",
     "SiteEvent",
     "SiteList",
     "SiteStatus",
@@ -89,12 +90,25 @@ class PlacementStatus(_Wire):
     started_at: float | None = Field(None, description="unix time the newest run started")
 
 
+class RobotStatus(_Wire):
+    """A robot connected over zenoh (its liveliness token), and what it sent to the site."""
+
+    robot_id: str
+    connected_since: float = Field(description="unix time its liveliness token appeared")
+    fragments: list[str] = Field(
+        default_factory=list, description="ids of this site's fragments the robot sent"
+    )
+
+
 class SiteStatus(_Wire):
     site_id: str
     created_at: float
     updated_at: float
     fragments: list[FragmentStatus]
     placement: PlacementStatus
+    robots: list[RobotStatus] = Field(
+        default_factory=list, description="robots connected over zenoh now (contract 5)"
+    )
 
 
 class SiteSummary(_Wire):

@@ -9,16 +9,27 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from functools import lru_cache
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from schemas.params import ParserLimits, PipelineParams
 
 __all__ = ["Settings", "get_settings"]
+
+_KEY_PREFIX = r"^[A-Za-z0-9._-]+(/[A-Za-z0-9._-]+)*$"
+_ROS_TOKEN = r"^[A-Za-z][A-Za-z0-9_]*$"
+_ROS_TOPIC = re.compile(r"/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
+_ID = re.compile(r"[A-Za-z0-9._-]{1,64}")
+_ENDPOINT = re.compile(r"[a-z][a-z0-9+-]*/\S+")
+
+
+def _endpoints(text: str) -> list[str]:
+    return [part.strip() for part in text.split(",") if part.strip()]
 
 
 class Settings(BaseSettings):
@@ -74,10 +85,49 @@ class Settings(BaseSettings):
     sse_keepalive_s: float = Field(15.0, gt=0, description="comment line on idle event streams")
     log_level: str = Field("info", description="debug, info, warning, error")
 
-    # Zenoh front end (contract section 5), used by the next issue's front end.
-    zenoh_listen: str = Field("tcp/0.0.0.0:7447", description="comma-separated, or none")
+    # Zenoh front end (contract section 5; api/zenoh).
+    zenoh_listen: str = Field(
+        "tcp/0.0.0.0:7447",
+        description="comma-separated endpoints to listen on, or none (front end off); "
+        "unused in client mode",
+    )
     zenoh_connect: str = Field("", description="comma-separated endpoints to connect to")
-    zenoh_prefix: str = Field("fpj", description="key expression prefix")
+    zenoh_prefix: str = Field(
+        "fpj", pattern=_KEY_PREFIX, description="key expression prefix (no wildcards)"
+    )
+    zenoh_mode: Literal["peer", "client", "router"] = Field(
+        "peer", description="zenoh mode of the service's session (client needs zenoh_connect)"
+    )
+    zenoh_multicast_scouting: bool = Field(
+        False, description="UDP multicast scouting (off: peers connect to the listen endpoints)"
+    )
+    zenoh_max_message_bytes: int | None = Field(
+        None,
+        ge=65_536,
+        description="transport/link/rx/max_message_size; default 2 x max_upload_bytes + 1 MiB, "
+        "so an oversized fragment still arrives and gets a fragment_too_large reply",
+    )
+    zenoh_presence_ttl_s: float = Field(
+        10.0, gt=0, description="robot presence in Redis expires unless refreshed this often"
+    )
+    zenoh_ros_domain_id: int = Field(0, ge=0, le=232, description="ROS_DOMAIN_ID of rmw_zenoh")
+    zenoh_ros_cloud_topics: str = Field(
+        "",
+        description="comma-separated TOPIC=SITE: sensor_msgs/msg/PointCloud2 topics whose "
+        "messages become fragments of SITE (e.g. /robot1/fragments=lab)",
+    )
+    zenoh_ros_pose_topic: str = Field(
+        "", description="geometry_msgs/msg/PoseStamped topic of fragment poses (empty: none)"
+    )
+    zenoh_ros_distro: str = Field(
+        "jazzy",
+        pattern=r"^[a-z]+$",
+        description="ROS 2 distribution of the robots: the type hash of published topics "
+        "(humble: TypeHashNotSupported)",
+    )
+    zenoh_ros_node: str = Field(
+        "floorplan_jigsaw", pattern=_ROS_TOKEN, description="ROS node name in the graph"
+    )
 
     @field_validator("tokens", mode="before")
     @classmethod
@@ -88,6 +138,70 @@ class Settings(BaseSettings):
                 return json.loads(text)
             return [part.strip() for part in text.split(",") if part.strip()]
         return value
+
+    @field_validator("zenoh_listen", "zenoh_connect")
+    @classmethod
+    def _check_endpoints(cls, value: str) -> str:
+        if value.strip().lower() == "none":
+            return value
+        for endpoint in _endpoints(value):
+            if not _ENDPOINT.fullmatch(endpoint):
+                raise ValueError(f"expected <protocol>/<address> endpoints, got {endpoint!r}")
+        return value
+
+    @field_validator("zenoh_ros_cloud_topics")
+    @classmethod
+    def _check_cloud_topics(cls, value: str) -> str:
+        for entry in _endpoints(value):
+            topic, _, site = entry.partition("=")
+            if not _ROS_TOPIC.fullmatch(topic.strip()) or not _ID.fullmatch(site.strip()):
+                raise ValueError(f"expected /ros/topic=site_id, got {entry!r}")
+        return value
+
+    @field_validator("zenoh_ros_pose_topic")
+    @classmethod
+    def _check_pose_topic(cls, value: str) -> str:
+        if value and not _ROS_TOPIC.fullmatch(value):
+            raise ValueError(f"invalid ROS topic name {value!r}")
+        return value
+
+    @model_validator(mode="after")
+    def _check_zenoh_mode(self) -> Settings:
+        if self.zenoh_enabled and self.zenoh_mode == "client" and not self.zenoh_connect_endpoints:
+            raise ValueError("zenoh client mode needs FPJ_ZENOH_CONNECT endpoints")
+        if self.zenoh_rx_max_message_size <= self.max_upload_bytes:
+            raise ValueError(
+                "zenoh_max_message_bytes must exceed max_upload_bytes (zenoh drops "
+                "larger messages silently, so fragments could vanish unanswered)"
+            )
+        return self
+
+    @property
+    def zenoh_enabled(self) -> bool:
+        """False when ``FPJ_ZENOH_LISTEN=none`` (the zenoh front end is off)."""
+        return self.zenoh_listen.strip().lower() != "none"
+
+    @property
+    def zenoh_listen_endpoints(self) -> list[str]:
+        """Endpoints the service's zenoh session listens on (empty when off)."""
+        return _endpoints(self.zenoh_listen) if self.zenoh_enabled else []
+
+    @property
+    def zenoh_connect_endpoints(self) -> list[str]:
+        """Endpoints (routers, robots) the service's zenoh session connects to."""
+        return _endpoints(self.zenoh_connect)
+
+    @property
+    def zenoh_rx_max_message_size(self) -> int:
+        """Largest zenoh message the service accepts (zenoh drops larger ones silently)."""
+        if self.zenoh_max_message_bytes is not None:
+            return self.zenoh_max_message_bytes
+        return 2 * self.max_upload_bytes + 1024 * 1024
+
+    def ros_cloud_topics(self) -> dict[str, str]:
+        """PointCloud2 topic (fully qualified, leading ``/``) -> site id."""
+        pairs = (entry.partition("=") for entry in _endpoints(self.zenoh_ros_cloud_topics))
+        return {"/" + topic.strip().lstrip("/"): site.strip() for topic, _, site in pairs}
 
     @property
     def embedded(self) -> bool:

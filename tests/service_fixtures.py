@@ -49,6 +49,7 @@ FAST: dict[str, Any] = {
     "sse_keepalive_s": 1.0,
     "min_points": 100,
     "log_level": "warning",
+    "zenoh_listen": "none",  # the zenoh front end is tested in tests/zenoh
 }
 
 

@@ -20,7 +20,10 @@ P:site:S:frag:F:layout    string  LocalLayoutWire JSON
 P:site:S:result           string  ResultModel JSON of the newest placement
 P:site:S:placement        string  id of the one queued/running placement job (with TTL)
 P:site:S:events           pubsub  SiteEvent JSON (fragment, placement, result)
+P:site:S:senders          hash    fragment id -> SenderRecord JSON (zenoh robot, ROS topic)
 P:results                 pubsub  ``{"site_id", "generation", "result"}`` per placement
+P:presence                zset    zenoh front end id -> last presence refresh (unix time)
+P:presence:Z              hash    robot id -> connected since, as seen by front end Z (TTL)
 ========================  ======  =======================================================
 """
 
@@ -89,3 +92,13 @@ class Keys:
     @property
     def results_channel(self) -> str:
         return f"{self.prefix}:results"
+
+    def site_senders(self, site_id: str) -> str:
+        return f"{self.prefix}:site:{site_id}:senders"
+
+    @property
+    def presence_fronts(self) -> str:
+        return f"{self.prefix}:presence"
+
+    def presence(self, front_id: str) -> str:
+        return f"{self.prefix}:presence:{front_id}"

@@ -1,0 +1,61 @@
+"""Wire models of the zenoh front end (contract section 5 and its additions).
+
+Everything the service and robots exchange over zenoh is JSON from these models, except the
+fragment payload (the file's bytes) and the ROS 2 topics (CDR, as rmw_zenoh sends them).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+__all__ = ["PoseUpdate", "RobotTag", "SenderRecord", "ServiceInfo"]
+
+
+class _Wire(BaseModel):
+    model_config = ConfigDict(frozen=True)
+
+
+class PoseUpdate(_Wire):
+    """One fragment's pose, published on ``fpj/sites/{site_id}/poses/{fragment_id}``."""
+
+    fragment_id: str
+    pose: list[list[float]] = Field(description="4x4 row-major, fragment-local to site frame")
+    status: Literal["closed", "open"] = Field(description="status of the site's result")
+
+
+class ServiceInfo(_Wire):
+    """Reply of the queryable ``fpj/service``: what a robot must know before sending."""
+
+    version: Literal[1] = 1
+    prefix: str = Field(description="key expression prefix of the service")
+    max_upload_bytes: int = Field(description="larger fragments get fragment_too_large")
+    max_message_bytes: int = Field(
+        description="zenoh drops larger messages without any reply (rx max_message_size)"
+    )
+
+
+class RobotTag(_Wire):
+    """Optional attachment of an ingest query or put: UTF-8 JSON of this object.
+
+    ``robot_id`` names the sender (listed in the site status while its liveliness token
+    ``fpj/robots/{robot_id}`` is alive); ``token`` is a bearer token of ``FPJ_TOKENS``,
+    required when the service has tokens configured.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="ignore")
+
+    robot_id: str | None = Field(None, pattern=r"^[A-Za-z0-9._-]{1,64}$")
+    token: str | None = None
+
+
+class SenderRecord(_Wire):
+    """Who sent a fragment (stored per site); ROS fragments keep their message header."""
+
+    robot_id: str
+    via: Literal["zenoh", "ros2"] = "zenoh"
+    topic: str | None = None
+    stamp_sec: int | None = None
+    stamp_nanosec: int | None = None
+    frame_id: str | None = None
