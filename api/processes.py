@@ -15,6 +15,7 @@ import logging
 import os
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -25,11 +26,23 @@ from pathlib import Path
 
 import redis
 
-__all__ = ["EmbeddedRedis", "WorkerSupervisor", "find_redis_server"]
+__all__ = [
+    "EmbeddedRedis",
+    "WorkerSupervisor",
+    "find_redis_server",
+    "free_tcp_port",
+]
 
 log = logging.getLogger(__name__)
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
+
+
+def free_tcp_port(host: str = "127.0.0.1") -> int:
+    """A TCP port nothing listens on right now (for demos, benchmarks and tests)."""
+    with socket.socket() as sock:
+        sock.bind((host, 0))
+        return int(sock.getsockname()[1])
 
 
 def _death_signal() -> Callable[[], None] | None:

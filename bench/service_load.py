@@ -39,16 +39,9 @@ import redis
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from api.processes import free_tcp_port  # noqa: E402
 from services.point_io import encode_ply  # noqa: E402
 from services.synthetic import SceneSpec, generate_scene  # noqa: E402
-
-
-def free_port() -> int:
-    import socket
-
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
 
 
 def make_fragments(count: int, points: int, seed: int) -> tuple[int, dict[str, bytes]]:
@@ -72,7 +65,7 @@ class Service:
 
     def __init__(self, workers: int, concurrency: int) -> None:
         self.dir = Path(tempfile.mkdtemp(prefix="fpj-bench-"))
-        self.redis_port, self.http_port = free_port(), free_port()
+        self.redis_port, self.http_port = free_tcp_port(), free_tcp_port()
         self.redis_url = f"redis://127.0.0.1:{self.redis_port}/0"
         self.url = f"http://127.0.0.1:{self.http_port}"
         self.workers, self.concurrency = workers, concurrency

@@ -18,7 +18,6 @@ import argparse
 import json
 import os
 import signal
-import socket
 import statistics
 import subprocess
 import sys
@@ -36,15 +35,10 @@ import zenoh
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from api.processes import free_tcp_port  # noqa: E402
 from api.zenoh.config import ZenohOptions, build_config  # noqa: E402
 from api.zenoh.keys import ZenohKeys  # noqa: E402
 from services.point_io import encode_ply  # noqa: E402
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
 
 
 @contextmanager
@@ -106,7 +100,7 @@ def _row(name: str, kind: str, data: bytes, size: int, values: list[float]) -> d
 
 
 def run(sizes: list[int], repeat: int) -> list[dict[str, Any]]:
-    zenoh_port, http_port = free_port(), free_port()
+    zenoh_port, http_port = free_tcp_port(), free_tcp_port()
     keys = ZenohKeys()
     rows = []
     options = ZenohOptions(connect=[f"tcp/127.0.0.1:{zenoh_port}"])

@@ -11,7 +11,6 @@ from __future__ import annotations
 import concurrent.futures
 import os
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -23,6 +22,7 @@ import httpx
 from rich.console import Console
 from rich.table import Table
 
+from api.processes import free_tcp_port
 from services.evaluation import evaluate_result
 from services.point_io import encode_ply
 from services.synthetic import SceneSpec, generate_scene, ground_truth_json
@@ -31,12 +31,6 @@ __all__ = ["run_service_demo"]
 
 _SITE = "demo-site"
 _ROBOTS = 3
-
-
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
 
 
 def _start_service(port: int, data_dir: Path) -> subprocess.Popen[bytes]:
@@ -119,7 +113,7 @@ def run_service_demo(out: Path, seed: int) -> int:
     scene = generate_scene(SceneSpec.paper(), seed)
     fragments = {f.id: encode_ply(f.points) for f in scene.fragments}
     out.mkdir(parents=True, exist_ok=True)
-    port = _free_port()
+    port = free_tcp_port()
     base_url = f"http://127.0.0.1:{port}"
     with tempfile.TemporaryDirectory(prefix="fpj-demo-") as data_dir:
         process = _start_service(port, Path(data_dir))

@@ -14,7 +14,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -31,7 +30,7 @@ import redis
 import uvicorn
 
 from api.main import create_app
-from api.processes import EmbeddedRedis
+from api.processes import EmbeddedRedis, free_tcp_port
 from schemas.settings import Settings
 from services.point_io import encode_ply
 
@@ -70,10 +69,7 @@ def settings_env(settings: Settings) -> dict[str, str]:
     return env
 
 
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
+free_port = free_tcp_port  # the name the service tests use
 
 
 def wait_until(
