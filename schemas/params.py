@@ -79,6 +79,13 @@ class PlacementParams(_Frozen):
     )
     boundary_sigma: float = Field(0.10, gt=0, description="sigma of the mismatch CDF, m")
     min_boundary_points: int = Field(50, ge=1)
+    max_closure_share: float = Field(
+        0.05,
+        gt=0,
+        description="largest closure gap before refinement, as a share of the loop's wall "
+        "length (at least 1 m), for the loop to count as closed; a larger gap means walls are "
+        "missing, and the refinement would only hide it",
+    )
     closure_overshoot: float = Field(
         1.5,
         gt=0,

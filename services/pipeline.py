@@ -142,8 +142,11 @@ def place_site(
         fragments[fid].placed = True
         fragments[fid].pose = pose.tolist()
         fragments[fid].loop_index = index
+    loop_length = sum(float(np.abs(np.diff(p.keypoints, axis=0)).sum()) for p in ordered)
+    gap_limit = max(1.0, params.placement.max_closure_share * loop_length)
     closed = (
         placement.closed
+        and best.closure <= gap_limit
         and len(best.order) == len(layouts)
         and len(usable) >= 2
         and refined.status == "solved"

@@ -22,6 +22,7 @@ __all__ = ["WallChain", "find_wall_chain"]
 
 _CORNER_REACH = 2.0  # m, how far past a segment's end a deduced corner may lie
 _OCCLUSION_REACH = 3.0  # m, longest gap the ST-graph links across on one line
+_MAX_OPEN_GAP = 0.5  # m, longest stretch a wall may run with nothing scanned beside it
 _CORNER_METERS = 0.5  # covered wall a corner must add to be worth it, m
 _COST_METERS = 0.1  # tie-break: meters of covered wall per unit of path cost
 _SNAP_CELLS = 2.0  # a segment end this close to a deduced corner is merged into it
@@ -122,7 +123,7 @@ def _edges(
                 corner = len(nodes.lines_of(u)) > 1 or len(nodes.lines_of(v)) > 1
                 if b == a + 1 and _st_link(line, (ru, rv), length, high, corner):
                     st[(min(u, v), max(u, v))] = max(length * line.cell_size, 1e-6)
-                if high == 0 or length <= 0:
+                if high == 0 or length <= 0 or line.open_gap(ru, rv) > _MAX_OPEN_GAP:
                     continue
                 # Cells are counted whole, so H may exceed the fractional L by a rounding.
                 weight = max(length - high, 0.0) / high + penalty

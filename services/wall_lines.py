@@ -31,6 +31,7 @@ _FAR_STRIP = 1.0  # m, depth of the strips in front of and behind a wall
 _BEHIND_RATIO = 0.3  # behind/front occupancy above which a cell is not a boundary
 _MAX_GAP_CELLS = 2  # low cells bridged inside one candidate segment
 _OCCLUSION_REACH = 3.0  # m, longest occluded stretch bridged between parallel walls
+_SUPPORT_POINTS = 3  # interior-strip points that show the line's cell borders scanned space
 _TOP_REACH = 0.85  # share of the floor-to-ceiling band a wall column must reach
 
 
@@ -43,6 +44,8 @@ class WallLine:
     travel: +1 or -1, the direction along the run axis that keeps the interior on the left.
     origin: run coordinate of the first cell's lower edge; cells are ``cell_size`` long.
     high: (C,) bool, high wall-evidence per cell.
+    unsupported: (C,) bool or None: cells with no evidence and nothing scanned on the
+    interior side (None: every cell counts as supported, as on a deduced wall).
     segments: (S, 2) float64 run-coordinate spans [start, end] of the candidate segments.
     virtual: True for a line deduced across an occluded stretch (no points of its own).
     """
@@ -55,14 +58,31 @@ class WallLine:
     high: NDArray[np.bool_]
     segments: FloatArray
     virtual: bool = False
+    unsupported: NDArray[np.bool_] | None = None
+
+    def open_gap(self, start: float, end: float) -> float:
+        """Longest stretch (m) between two run coordinates with neither wall evidence nor
+        scanned space on the interior side: the line runs outside the room there."""
+        if self.unsupported is None:
+            return 0.0
+        i0, i1 = self._cells(start, end)
+        flags = self.unsupported[i0:i1]
+        if not flags.any():
+            return 0.0
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], flags.astype(np.int8), [0]])))
+        return float((edges[1::2] - edges[::2]).max()) * self.cell_size
+
+    def _cells(self, start: float, end: float) -> tuple[int, int]:
+        lo, hi = sorted((start, end))
+        i0 = int(np.clip(np.rint((lo - self.origin) / self.cell_size), 0, len(self.high)))
+        i1 = int(np.clip(np.rint((hi - self.origin) / self.cell_size), 0, len(self.high)))
+        return i0, i1
 
     def evidence(self, start: float, end: float) -> tuple[float, int]:
         """Length L in cells and the count H of high cells between two run coordinates."""
-        lo, hi = sorted((start, end))
-        cum = np.concatenate([[0], np.cumsum(self.high)])
-        i0 = int(np.clip(np.rint((lo - self.origin) / self.cell_size), 0, len(self.high)))
-        i1 = int(np.clip(np.rint((hi - self.origin) / self.cell_size), 0, len(self.high)))
-        return (hi - lo) / self.cell_size, int(cum[i1] - cum[i0])
+        i0, i1 = self._cells(start, end)
+        high = int(np.count_nonzero(self.high[i0:i1]))
+        return abs(end - start) / self.cell_size, high
 
     def point(self, run: float) -> FloatArray:
         """The (x, y) point at run coordinate ``run`` on this line."""
@@ -197,7 +217,8 @@ def _lines_from_peak(
         # Interior on the left: along x, interior +y means travelling +x; along y,
         # interior +x means travelling -y.
         travel = sign if axis == 0 else -sign
-        lines.append(WallLine(axis, offset, travel, origin, s, high, segments))
+        unsupported = ~high & (near_side < _SUPPORT_POINTS)
+        lines.append(WallLine(axis, offset, travel, origin, s, high, segments, False, unsupported))
     return lines
 
 
