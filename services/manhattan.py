@@ -1,10 +1,15 @@
 """Manhattan frame of one fragment: up axis, wall directions, floor and ceiling heights.
 
-Paper section 3.1, preprocessing. Local planar patches (normals of a thinned cloud) vote
-for the dominant orientations: horizontal surfaces (floor, ceiling, table tops) for the up
-axis and vertical ones (walls, furniture sides) for the wall directions. Voting on normals
-is a Hough-style plane search that keeps every plane, large or small, so clutter, a tilted
-sensor and floor-only regions are handled the same way.
+Paper section 3.1, preprocessing, in three steps:
+
+1. Planes by sequential RANSAC give the first up axis (the largest near-horizontal plane:
+   floor or ceiling).
+2. Local planar patches (normals of a thinned cloud) vote for the dominant orientations:
+   horizontal surfaces refine the up axis, vertical ones (walls, furniture sides) give the
+   wall directions modulo 90 degrees. Voting keeps every plane, large or small, so clutter,
+   a tilted sensor and floor-only regions are handled alike.
+3. Fine tilt and yaw: the small rotation that makes floor heights and wall offsets pile up
+   most sharply (the whole scan is the lever arm, not a 15 cm normal neighbourhood).
 """
 
 from __future__ import annotations
@@ -56,9 +61,36 @@ def thin_with_normals(points: FloatArray, params: ManhattanParams) -> OrientedCl
     )
 
 
-def _estimate_up(normals: FloatArray, max_tilt_deg: float) -> FloatArray:
+def _floor_plane_normal(cloud: OrientedCloud, params: ManhattanParams) -> FloatArray | None:
+    """Normal of the largest near-horizontal plane found by sequential RANSAC, or None.
+
+    Planes are peeled off largest first (walls, floor, ceiling, table tops); the first one
+    within the tilt limit of +z that holds enough points is taken as floor or ceiling.
+    """
+    if len(cloud.points) < 100:
+        return None
+    o3d.utility.random.seed(0)  # reproducible plane order
+    rest = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(cloud.points))
+    needed = params.min_plane_fraction * len(cloud.points)
+    for _ in range(params.max_planes):
+        if len(rest.points) < max(needed, 3):
+            return None
+        (a, b, c, _), inliers = rest.segment_plane(
+            params.ransac_distance, 3, params.ransac_iterations
+        )
+        if len(inliers) < needed:
+            return None
+        normal = np.array([a, b, c]) / np.linalg.norm([a, b, c])
+        if abs(normal[2]) > np.cos(np.radians(params.max_tilt_deg)):
+            found: FloatArray = normal if normal[2] > 0 else -normal
+            return found
+        rest = rest.select_by_index(inliers, invert=True)
+    return None
+
+
+def _estimate_up(normals: FloatArray, max_tilt_deg: float, start: FloatArray) -> FloatArray:
     """Up axis: aligned with horizontal-surface normals, orthogonal to wall normals."""
-    up = np.array([0.0, 0.0, 1.0])
+    up = start
     # Each pass narrows the cones around the current estimate, so clutter drops out.
     for cone_deg in (max_tilt_deg, 15.0, 8.0):
         cos_n = np.abs(normals @ up)
@@ -153,11 +185,18 @@ def _estimate_yaw(levelled_normals: FloatArray) -> tuple[float, float]:
 
 
 def _sharpness(values: FloatArray, bin_size: float = 0.02) -> float:
-    """Sum of squared histogram counts: large when the values pile up on few levels."""
+    """Sum of squared histogram counts: large when the values pile up on few levels.
+
+    Two histograms half a bin apart are summed, so a level sitting on a bin edge scores
+    like one in a bin's middle (no aliasing between nearby candidate rotations).
+    """
     if len(values) == 0:
         return 0.0
-    idx = np.floor(values / bin_size).astype(np.int64)
-    return float(np.sum(np.bincount(idx - idx.min()).astype(np.float64) ** 2))
+    total = 0.0
+    for shift in (0.0, 0.5):
+        idx = np.floor(values / bin_size + shift).astype(np.int64)
+        total += float(np.sum(np.bincount(idx - idx.min()).astype(np.float64) ** 2))
+    return total
 
 
 def _sharpen_tilt(aligned: FloatArray, normals: FloatArray) -> FloatArray:
@@ -227,7 +266,7 @@ def _sharpen_yaw(
 
     best = yaw
     for step in (0.25, 0.025):
-        span = span_deg if step > 0.1 else 0.25
+        span = span_deg if step > 0.1 else 0.35
         candidates = best + np.radians(np.arange(-span, span + 1e-9, step))
         best = float(max(candidates, key=score))
     return best
@@ -288,7 +327,9 @@ def estimate_manhattan_frame(
     """
     if len(cloud.points) == 0:
         return ManhattanFrame(rotation=np.eye(3), floor_z=0.0, ceiling_z=None)
-    up = _estimate_up(cloud.normals, params.max_tilt_deg)
+    plane = _floor_plane_normal(cloud, params)
+    start = plane if plane is not None else np.array([0.0, 0.0, 1.0])
+    up = _estimate_up(cloud.normals, params.max_tilt_deg, start)
     up = _refine_up_on_floor(cloud, up)
     tilt = _minimal_tilt_rotation(up)
     levelled = cloud.normals @ tilt.T
