@@ -234,8 +234,8 @@ def _occluded_links(lines: list[WallLine], grid: _Grid) -> list[WallLine]:
         for b in lines:
             if a is b or a.axis != b.axis or a.travel != b.travel or a.virtual or b.virtual:
                 continue
-            if abs(a.offset - b.offset) < 2 * cell:
-                continue
+            if not 2 * cell <= abs(a.offset - b.offset) <= _OCCLUSION_REACH:
+                continue  # a step too small to be a wall, or too long to be hidden
             for end in a.segments[:, 1] if a.travel > 0 else a.segments[:, 0]:
                 for start in b.segments[:, 0] if a.travel > 0 else b.segments[:, 1]:
                     ahead = (start - end) * a.travel
