@@ -14,6 +14,7 @@ from pathlib import Path
 from time import perf_counter
 from typing import Any
 
+from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from cli.exports import ExportTargets, write_exports
@@ -72,8 +73,12 @@ def read_fragments(paths: list[Path], params: PipelineParams) -> dict[str, Float
 
 @contextmanager
 def _progress(total: int) -> Iterator[Progress]:
+    """A progress bar on stderr (stdout may carry the result JSON), only on a terminal."""
     columns = (TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn())
-    with Progress(*columns, transient=True, console=None, disable=not sys.stderr.isatty()) as bar:
+    console = Console(stderr=True)
+    with Progress(
+        *columns, transient=True, console=console, disable=not sys.stderr.isatty()
+    ) as bar:
         yield bar
 
 
