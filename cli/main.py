@@ -41,12 +41,21 @@ def align(
     picture: Annotated[
         Path | None, typer.Option(help="also write a floorplan top view (.svg or .png)")
     ] = None,
+    premerge: Annotated[
+        bool,
+        typer.Option(
+            "--premerge",
+            help="first merge fragments that overlap (FPFH registration, > 60% inliers); "
+            "slow (seconds per pair) and may merge wrongly on repetitive rooms",
+        ),
+    ] = False,
 ) -> None:
     """Align fragments into one room: poses, floorplan (result JSON of the contract)."""
     from cli.exports import ExportTargets
     from cli.pipeline import run_align
 
-    raise typer.Exit(run_align(paths, output, exports=ExportTargets(cloud, model, picture)))
+    targets = ExportTargets(cloud, model, picture)
+    raise typer.Exit(run_align(paths, output, exports=targets, premerge=premerge))
 
 
 @app.command()

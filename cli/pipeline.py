@@ -22,7 +22,7 @@ from schemas.params import PipelineParams
 from schemas.result import ResultModel
 from services.errors import JigsawError
 from services.parsing import parse_fragment
-from services.pipeline import estimate_layout, place_site
+from services.pipeline import align_clouds, estimate_layout, place_site
 from services.types import FloatArray, LocalLayout
 
 __all__ = [
@@ -167,9 +167,10 @@ def run_align(
     output: Path | None,
     params: PipelineParams | None = None,
     exports: ExportTargets | None = None,
+    premerge: bool = False,
 ) -> int:
     """``jigsaw align``: the contract's result JSON, plus optional exports. Returns the exit
-    code."""
+    code. With ``premerge``, overlapping fragments are first merged by FPFH registration."""
     params = params or PipelineParams()
     exports = exports or ExportTargets()
     if problems := exports.problems():
@@ -180,13 +181,16 @@ def run_align(
         print("error: no usable fragment", file=sys.stderr)
         return EXIT_NO_INPUT
     try:
-        run = align_fragments(clouds, params)
+        if premerge:
+            result = align_clouds(clouds, params, premerge_overlapping=True)
+        else:
+            result = align_fragments(clouds, params).result
     except Exception as exc:  # an internal failure must still end with a message and code 1
         print(f"internal error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return EXIT_INTERNAL
-    _write_json(run.result.model_dump(mode="json"), output)
+    _write_json(result.model_dump(mode="json"), output)
     try:
-        notes = write_exports(exports, clouds, run.result)
+        notes = write_exports(exports, clouds, result)
     except OSError as exc:
         print(f"{exc.filename or 'export'}: cannot write: {exc.strerror or exc}", file=sys.stderr)
         return EXIT_INTERNAL

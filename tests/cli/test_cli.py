@@ -14,6 +14,8 @@ import open3d as o3d
 import pytest
 
 from schemas.result import ResultModel
+from services.parsing import parse_fragment
+from services.point_io import encode_ply
 from services.synthetic import SyntheticScene
 from tests.cli.conftest import RunJigsaw
 
@@ -171,3 +173,28 @@ def test_demo_writes_pictures(run_jigsaw: RunJigsaw, tmp_path: Path) -> None:
     assert (out / "scene" / "ground_truth.json").exists()
     for word in ("ACC_global", "layout error", "IoU", "energy margin"):
         assert word in process.stdout
+
+
+def test_premerge_keeps_a_pose_for_every_input_file(
+    run_jigsaw: RunJigsaw, scene_dir: Path, tmp_path: Path
+) -> None:
+    # A second copy of one scan, moved to another frame: the pre-merge registers it onto
+    # the original, and both still get their own pose.
+    first = sorted(scene_dir.glob("*.ply"))[0]
+    for ply in sorted(scene_dir.glob("*.ply")):
+        shutil.copy(ply, tmp_path / ply.name)
+    points = parse_fragment(first.read_bytes()).points
+    moved = points @ np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]).T + 2.0
+    (tmp_path / "copy.ply").write_bytes(encode_ply(moved))
+    process = run_jigsaw("align", tmp_path, "--premerge", "-o", tmp_path / "out.json", timeout=300)
+    assert process.returncode == 0, process.stderr
+    result = ResultModel.model_validate_json((tmp_path / "out.json").read_text())
+    by_id = {f.id: f for f in result.fragments}
+    assert set(by_id) == {p.stem for p in tmp_path.glob("*.ply")}
+    assert by_id["copy"].pose is not None and by_id[first.stem].pose is not None
+    # copy-local = R original-local + 2: the two poses differ by exactly that motion.
+    motion = np.eye(4)
+    motion[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+    motion[:3, 3] = 2.0
+    expected = np.array(by_id[first.stem].pose) @ np.linalg.inv(motion)
+    assert np.allclose(np.array(by_id["copy"].pose), expected, atol=0.05)
