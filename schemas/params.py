@@ -100,7 +100,7 @@ class PlacementParams(_Frozen):
         5.0, gt=0, description="search time before the best found so far is returned, s"
     )
     max_search_nodes: int = Field(
-        30_000, ge=1, description="search nodes before the best found so far is returned"
+        8_000, ge=1, description="search nodes before the best found so far is returned"
     )
 
 

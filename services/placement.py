@@ -508,10 +508,11 @@ def place_pieces(
     successor, predecessor = _constraint_maps([p.id for p in pieces], order_hint, neighbours)
     root = _root(pieces[0], params)
     nodes = 0
+    deadline = time.monotonic() + params.max_search_seconds  # shared by both searches
     for require_closed in (True, False):
         search = _Search(list(pieces), params, mismatch, successor, predecessor, require_closed)
         search.cheapest_pair = _cheapest_pairs(mismatch, n)
-        search.deadline = time.monotonic() + params.max_search_seconds
+        search.deadline = deadline
         _dfs(search, root, tuple(range(1, n)))
         nodes += search.nodes
         if search.top:
