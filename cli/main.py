@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
+
+if TYPE_CHECKING:
+    from api.zenoh.client import RobotOptions
 
 app = typer.Typer(
     add_completion=False,
@@ -137,6 +140,29 @@ TokenOpt = Annotated[str | None, typer.Option(help="bearer token, if the service
 TimeoutOpt = Annotated[float, typer.Option(help="seconds to wait for the service and replies")]
 
 
+def _robot_options(
+    connect: list[str] | None,
+    mode: str,
+    scout: bool,
+    prefix: str,
+    robot: str | None,
+    token: str | None,
+    timeout: float,
+) -> RobotOptions:
+    """The robot-side zenoh options shared by ``send`` and ``watch``."""
+    from api.zenoh.client import robot_options
+
+    return robot_options(
+        connect or ["tcp/127.0.0.1:7447"],
+        mode=mode,
+        scout=scout,
+        prefix=prefix,
+        robot_id=robot,
+        token=token,
+        timeout=timeout,
+    )
+
+
 @app.command()
 def send(
     files: Annotated[list[Path], typer.Argument(help="PLY/PCD files; fragment id = file stem")],
@@ -152,17 +178,9 @@ def send(
     """Send fragments to the service over zenoh (one query each); print each reply."""
     import sys
 
-    from api.zenoh.client import robot_options, send_fragments
+    from api.zenoh.client import send_fragments
 
-    options = robot_options(
-        connect or ["tcp/127.0.0.1:7447"],
-        mode=mode,
-        scout=scout,
-        prefix=prefix,
-        robot_id=robot,
-        token=token,
-        timeout=timeout,
-    )
+    options = _robot_options(connect, mode, scout, prefix, robot, token, timeout)
     raise typer.Exit(send_fragments(options, site, files, sys.stdout, sys.stderr))
 
 
@@ -183,17 +201,9 @@ def watch(
     """Print the site's pose updates over zenoh as they arrive (one JSON per line)."""
     import sys
 
-    from api.zenoh.client import robot_options, watch_poses
+    from api.zenoh.client import watch_poses
 
-    options = robot_options(
-        connect or ["tcp/127.0.0.1:7447"],
-        mode=mode,
-        scout=scout,
-        prefix=prefix,
-        robot_id=robot,
-        token=token,
-        timeout=timeout,
-    )
+    options = _robot_options(connect, mode, scout, prefix, robot, token, timeout)
     code = watch_poses(
         options, site, sys.stdout, sys.stderr, count=count, duration=duration, latest=latest
     )
