@@ -72,7 +72,7 @@ def read_fragments(paths: list[Path], params: PipelineParams) -> dict[str, Float
 
 
 @contextmanager
-def _progress(total: int) -> Iterator[Progress]:
+def _progress() -> Iterator[Progress]:
     """A progress bar on stderr (stdout may carry the result JSON), only on a terminal."""
     columns = (TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn())
     console = Console(stderr=True)
@@ -84,7 +84,7 @@ def _progress(total: int) -> Iterator[Progress]:
 
 def _layouts(clouds: dict[str, FloatArray], params: PipelineParams) -> dict[str, LocalLayout]:
     layouts: dict[str, LocalLayout] = {}
-    with _progress(len(clouds)) as bar:
+    with _progress() as bar:
         task = bar.add_task("local layouts", total=len(clouds))
         for fid, points in clouds.items():
             bar.update(task, description=f"local layout {fid}")

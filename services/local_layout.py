@@ -2,19 +2,16 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 
 from schemas.params import PipelineParams
 from services.manhattan import estimate_manhattan_frame, thin_with_normals
-from services.types import FloatArray, LocalLayout
+from services.types import FloatArray, LocalLayout, ProgressFn
 from services.wall_graph import find_wall_chain
 from services.wall_lines import find_wall_lines
 
 __all__ = ["boundary_points", "estimate_local_layout", "footprint_cells"]
 
-ProgressFn = Callable[[str, float], None]
 _MAX_BOUNDARY_POINTS = 2000
 _FOOTPRINT_CELL = 0.25  # m
 _FOOTPRINT_MIN_POINTS = 4

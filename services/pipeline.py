@@ -7,7 +7,7 @@ and the contract's result.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -25,11 +25,9 @@ from services.local_layout import estimate_local_layout
 from services.placement import Placement, make_piece, place_pieces, rot90
 from services.refinement import Refinement, refine_translations
 from services.registration import premerge
-from services.types import FloatArray, LocalLayout
+from services.types import FloatArray, LocalLayout, ProgressFn
 
 __all__ = ["ProgressFn", "align_clouds", "estimate_layout", "fragment_pose", "place_site"]
-
-ProgressFn = Callable[[str, float], None]
 
 
 def estimate_layout(

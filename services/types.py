@@ -6,6 +6,7 @@ frame (z up, walls along x or y, same origin as local); *site* is the common out
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -16,9 +17,11 @@ __all__ = [
     "LocalLayout",
     "ManhattanFrame",
     "ParsedFragment",
+    "ProgressFn",
 ]
 
 FloatArray = NDArray[np.float64]
+ProgressFn = Callable[[str, float], None]  # (stage, fraction done) for long work
 
 
 @dataclass(frozen=True)

@@ -48,9 +48,6 @@ class _Nodes:
     on_line: dict[int, dict[int, float]]  # line index -> {node index: run coordinate}
     _index: dict[tuple[int, int], int]
 
-    def lines_of(self, node: int) -> list[int]:
-        return [li for li, members in self.on_line.items() if node in members]
-
     def add(self, point: FloatArray, memberships: list[tuple[int, float]]) -> None:
         key = (round(float(point[0]) * 100), round(float(point[1]) * 100))
         node = self._index.get(key)
@@ -113,6 +110,10 @@ def _edges(
     we: dict[tuple[int, int], float] = {}
     st: dict[tuple[int, int], float] = {}
     cover = np.zeros((n, n))
+    # How many lines each node lies on: more than one makes it a corner.
+    memberships = np.bincount(
+        [node for members in nodes.on_line.values() for node in members], minlength=n
+    )
     for li, members in nodes.on_line.items():
         line = lines[li]
         ordered = sorted(members.items(), key=lambda kv: kv[1] * line.travel)
@@ -120,9 +121,10 @@ def _edges(
             for b in range(a + 1, len(ordered)):
                 (u, ru), (v, rv) = ordered[a], ordered[b]
                 length, high = line.evidence(ru, rv)
-                corner = len(nodes.lines_of(u)) > 1 or len(nodes.lines_of(v)) > 1
-                if b == a + 1 and _st_link(line, (ru, rv), length, high, corner):
-                    st[(min(u, v), max(u, v))] = max(length * line.cell_size, 1e-6)
+                if b == a + 1:
+                    corner = bool(memberships[u] > 1 or memberships[v] > 1)
+                    if _st_link(line, (ru, rv), length, high, corner):
+                        st[(min(u, v), max(u, v))] = max(length * line.cell_size, 1e-6)
                 if high == 0 or length <= 0 or line.open_gap(ru, rv) > _MAX_OPEN_GAP:
                     continue
                 # Cells are counted whole, so H may exceed the fractional L by a rounding.
