@@ -10,6 +10,17 @@ import pytest
 
 from services.placement import Piece, _direction_index, rot90
 from services.synthetic import SceneSpec, SyntheticScene, generate_scene
+from tests.service_fixtures import (  # noqa: F401  (real Redis 7 / 6.2, uvicorn, workers)
+    any_redis,
+    api,
+    api_factory,
+    redis7_url,
+    redis62_url,
+    redis_client,
+    redis_process,
+    redis_url,
+    start_workers,
+)
 
 __all__ = ["chains_from_polygon", "small_scene"]
 
