@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import open3d as o3d
+from numpy.typing import NDArray
 
 from schemas.params import ManhattanParams
 from services.types import FloatArray, ManhattanFrame
@@ -25,6 +26,7 @@ from services.types import FloatArray, ManhattanFrame
 __all__ = ["OrientedCloud", "estimate_manhattan_frame", "thin_with_normals"]
 
 _NORMAL_RADIUS = 3.0  # neighbourhood radius for normals, in voxel sizes
+_RANSAC_CHUNK = 64  # candidate planes scored per matrix product (bounds memory)
 _SHARPEN_POINTS = 12_000  # points used by the fine tilt and yaw search
 _MIN_CEILING_CLEARANCE = 1.8  # m; a horizontal surface lower than this over the floor is furniture
 
@@ -69,23 +71,48 @@ def _floor_plane_normal(cloud: OrientedCloud, params: ManhattanParams) -> FloatA
     """
     if len(cloud.points) < 100:
         return None
-    o3d.utility.random.seed(0)  # reproducible plane order
-    rest = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(cloud.points))
+    rng = np.random.default_rng(0)  # same input, same planes
+    rest = cloud.points
     needed = params.min_plane_fraction * len(cloud.points)
     for _ in range(params.max_planes):
-        if len(rest.points) < max(needed, 3):
+        if len(rest) < max(needed, 3):
             return None
-        (a, b, c, _), inliers = rest.segment_plane(
-            params.ransac_distance, 3, params.ransac_iterations
-        )
-        if len(inliers) < needed:
+        normal, inliers = _ransac_plane(rest, params.ransac_distance, params.ransac_iterations, rng)
+        if np.count_nonzero(inliers) < needed:
             return None
-        normal = np.array([a, b, c]) / np.linalg.norm([a, b, c])
         if abs(normal[2]) > np.cos(np.radians(params.max_tilt_deg)):
             found: FloatArray = normal if normal[2] > 0 else -normal
             return found
-        rest = rest.select_by_index(inliers, invert=True)
+        rest = rest[~inliers]
     return None
+
+
+def _ransac_plane(
+    points: FloatArray, distance: float, iterations: int, rng: np.random.Generator
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """The plane with most inliers among ``iterations`` random triples, refitted to its
+    inliers by least squares: (unit normal, inlier mask).
+
+    Our own seeded RANSAC rather than Open3D's, whose threads draw samples in a varying
+    order: the same fragment must give the same frame on every run.
+    """
+    triples = points[rng.integers(0, len(points), size=(iterations, 3))]
+    normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
+    length = np.linalg.norm(normals, axis=1)
+    normals, triples = normals[length > 1e-12], triples[length > 1e-12]
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    offsets = -np.einsum("ij,ij->i", normals, triples[:, 0])
+    counts = np.zeros(len(normals), dtype=np.int64)
+    for lo in range(0, len(normals), _RANSAC_CHUNK):
+        hi = lo + _RANSAC_CHUNK
+        counts[lo:hi] = (np.abs(points @ normals[lo:hi].T + offsets[lo:hi]) < distance).sum(0)
+    if len(counts) == 0:
+        return np.array([0.0, 0.0, 1.0]), np.zeros(len(points), dtype=bool)
+    best = int(np.argmax(counts))
+    inliers = np.abs(points @ normals[best] + offsets[best]) < distance
+    centre = points[inliers].mean(axis=0)
+    normal: FloatArray = np.linalg.svd(points[inliers] - centre, full_matrices=False)[2][-1]
+    return normal, np.abs((points - centre) @ normal) < distance
 
 
 def _estimate_up(normals: FloatArray, max_tilt_deg: float, start: FloatArray) -> FloatArray:

@@ -8,6 +8,7 @@ interior stays on the left, with the paper's weight ``(L - H) / H + lambda``.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,7 +24,8 @@ __all__ = ["WallChain", "find_wall_chain"]
 _CORNER_REACH = 2.0  # m, how far past a segment's end a deduced corner may lie
 _OCCLUSION_REACH = 3.0  # m, longest gap the ST-graph links across on one line
 _MAX_OPEN_GAP = 0.5  # m, longest stretch a wall may run with nothing scanned beside it
-_CORNER_METERS = 0.5  # covered wall a corner must add to be worth it, m
+_MAX_DOORWAY = 2.0  # m, longest stretch a wall may run with space seen on both sides
+_CORNER_METERS = 0.3  # covered wall a corner must add to be worth it, m
 _COST_METERS = 0.1  # tie-break: meters of covered wall per unit of path cost
 _SNAP_CELLS = 2.0  # a segment end this close to a deduced corner is merged into it
 
@@ -125,7 +127,12 @@ def _edges(
                     corner = bool(memberships[u] > 1 or memberships[v] > 1)
                     if _st_link(line, (ru, rv), length, high, corner):
                         st[(min(u, v), max(u, v))] = max(length * line.cell_size, 1e-6)
-                if high == 0 or length <= 0 or line.open_gap(ru, rv) > _MAX_OPEN_GAP:
+                if (
+                    high == 0
+                    or length <= 0
+                    or line.open_gap(ru, rv) > _MAX_OPEN_GAP
+                    or line.crossing_gap(ru, rv) > _MAX_DOORWAY
+                ):
                     continue
                 # Cells are counted whole, so H may exceed the fractional L by a rounding.
                 weight = max(length - high, 0.0) / high + penalty
@@ -190,53 +197,71 @@ def _forest_path(we: csr_matrix, st: csr_matrix) -> tuple[list[int], float] | No
 def _best_path(
     we: csr_matrix, cover: FloatArray, points: FloatArray
 ) -> tuple[list[int], float] | None:
-    """The directed min-cost path that explains the most wall.
+    """The directed simple path that explains the most wall.
 
-    Over every source and target of the min-cost paths: covered high-evidence length,
-    less a price per corner (a spurious extension through a deduced corner adds little
-    wall), less a small share of the path cost as a tie-break. A gap in a straight wall (a
-    door) costs nothing here, so a chain is not cut short before the last stretch of wall.
-    The paper instead takes the two ends of the longest path in a spanning forest of the
-    keypoints (``source_target="spanning_forest"``); with clutter that forest shortcuts
-    through spurious corners.
+    Score of a path: covered high-evidence length, less a price per corner (a spurious
+    extension through a deduced corner adds little wall), less a small share of the paper's
+    path cost as a tie-break. A min-cost path would rather skip a stretch of walls along
+    one long, partly evidenced line than follow them; this score follows them. A door or a
+    cabinet in front of a wall costs nothing, so a chain is not cut short before the last
+    stretch of wall; edges never run far through space seen on both sides of their line
+    (see :meth:`WallLine.crossing_gap`). The paper instead takes
+    the two ends of the longest path in a spanning forest of the keypoints
+    (``source_target="spanning_forest"``).
 
-    points: (n, 2) node coordinates, to tell where a path turns.
+    The search is label-correcting over (node, arrival axis) states, one best simple path
+    per state: a fragment may see closed loops of walls (a recess seen whole), so the
+    path's own nodes are excluded from its extensions.
+
+    cover: (n, n) high-evidence wall length of each edge, m; points: (n, 2) node
+    coordinates.
     """
     n = we.shape[0]
-    if n < 2:
+    coo = we.tocoo()
+    if n < 2 or coo.nnz == 0:
         return None
-    dist, pred = dijkstra(we, directed=True, return_predecessors=True)
-    best: tuple[float, int, int] | None = None
-    for source in range(n):
-        # Covered length and turns along the shortest-path tree, in order of distance.
-        covered = np.zeros(n)
-        turns = np.zeros(n)
-        axis = np.full(n, -1)
-        for node in np.argsort(dist[source]):
-            parent = pred[source, node]
-            if parent < 0 or not np.isfinite(dist[source, node]):
-                continue
-            step = np.abs(points[node] - points[parent])
-            axis[node] = int(step[1] > step[0])
-            covered[node] = covered[parent] + cover[parent, node]
-            turns[node] = turns[parent] + (axis[parent] >= 0 and axis[parent] != axis[node])
-        finite = np.isfinite(dist[source])
-        score = np.where(
-            finite,
-            covered - _CORNER_METERS * turns - _COST_METERS * np.where(finite, dist[source], 0),
-            -np.inf,
-        )
-        score[source] = -np.inf
-        target = int(np.argmax(score))
-        if np.isfinite(score[target]) and (best is None or score[target] > best[0]):
-            best = (float(score[target]), source, target)
-    if best is None:
+    u, v = coo.row.astype(np.int64), coo.col.astype(np.int64)
+    step = np.abs(points[v] - points[u])
+    axis = (step[:, 1] > step[:, 0]).astype(np.int64)
+    gain = cover[u, v] - _COST_METERS * coo.data
+    target = 2 * v + axis
+    value = np.full(2 * n, -np.inf)
+    on_path = np.zeros((2 * n, n), dtype=bool)
+    paths: list[list[int]] = [[] for _ in range(2 * n)]
+    edges = np.arange(len(u))
+    for _ in range(2 * n + 1):
+        # Each edge: start the path at its tail, or extend the path arriving there along
+        # either axis (a turn costs a corner) unless that path already holds the head.
+        options = np.zeros((len(u), 3))
+        for arrival in (0, 1):
+            tail = 2 * u + arrival
+            extend = value[tail] - _CORNER_METERS * (axis != arrival)
+            options[:, arrival + 1] = np.where(on_path[tail, v], -np.inf, extend)
+        choice = np.argmax(options, axis=1)
+        candidate = options[edges, choice] + gain
+        order = np.argsort(candidate)  # ascending: the best candidate per state lands last
+        best = np.full(2 * n, -np.inf)
+        best[target[order]] = candidate[order]
+        edge_of = np.full(2 * n, -1)
+        edge_of[target[order]] = order
+        changed = np.flatnonzero(best > value + 1e-9)
+        if len(changed) == 0:
+            break
+        # Paths of the previous round: an update must not read a path changed in this one.
+        before = [paths[2 * int(u[edge_of[s]]) + choice[edge_of[s]] - 1] for s in changed]
+        for updated, prefix in zip(changed, before, strict=True):
+            e = int(edge_of[updated])
+            path = [int(u[e]), int(v[e])] if choice[e] == 0 else [*prefix, int(v[e])]
+            paths[updated] = path
+            on_path[updated] = False
+            on_path[updated, path] = True
+        value[changed] = best[changed]
+    final = int(np.argmax(value))
+    if not np.isfinite(value[final]):
         return None
-    _, source, target = best
-    path = [target]
-    while path[-1] != source:
-        path.append(int(pred[source, path[-1]]))
-    return path[::-1], float(dist[source, target])
+    path = paths[final]
+    cost = float(sum(we[a, b] for a, b in itertools.pairwise(path)))
+    return path, cost
 
 
 def _corners_only(points: FloatArray) -> FloatArray:

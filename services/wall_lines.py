@@ -48,6 +48,8 @@ class WallLine:
     interior side (None: every cell counts as supported, as on a deduced wall).
     segments: (S, 2) float64 run-coordinate spans [start, end] of the candidate segments.
     virtual: True for a line deduced across an occluded stretch (no points of its own).
+    seen_through: (C,) bool or None: cells with no evidence where space was scanned behind
+    the line as well as in front (None on a deduced wall).
     """
 
     axis: int
@@ -59,17 +61,26 @@ class WallLine:
     segments: FloatArray
     virtual: bool = False
     unsupported: NDArray[np.bool_] | None = None
+    seen_through: NDArray[np.bool_] | None = None
 
     def open_gap(self, start: float, end: float) -> float:
         """Longest stretch (m) between two run coordinates with neither wall evidence nor
         scanned space on the interior side: the line runs outside the room there."""
-        if self.unsupported is None:
+        return self._longest_run(self.unsupported, start, end)
+
+    def crossing_gap(self, start: float, end: float) -> float:
+        """Longest stretch (m) between two run coordinates where the scan saw space on both
+        sides of the line: no wall stands there, at most a doorway."""
+        return self._longest_run(self.seen_through, start, end)
+
+    def _longest_run(self, flags: NDArray[np.bool_] | None, start: float, end: float) -> float:
+        if flags is None:
             return 0.0
         i0, i1 = self._cells(start, end)
-        flags = self.unsupported[i0:i1]
-        if not flags.any():
+        window = flags[i0:i1]
+        if not window.any():
             return 0.0
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], flags.astype(np.int8), [0]])))
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], window.astype(np.int8), [0]])))
         return float((edges[1::2] - edges[::2]).max()) * self.cell_size
 
     def _cells(self, start: float, end: float) -> tuple[int, int]:
@@ -218,7 +229,12 @@ def _lines_from_peak(
         # interior +x means travelling -y.
         travel = sign if axis == 0 else -sign
         unsupported = ~high & (near_side < _SUPPORT_POINTS)
-        lines.append(WallLine(axis, offset, travel, origin, s, high, segments, False, unsupported))
+        seen_through = ~high & (far_side >= _SUPPORT_POINTS)
+        lines.append(
+            WallLine(
+                axis, offset, travel, origin, s, high, segments, False, unsupported, seen_through
+            )
+        )
     return lines
 
 

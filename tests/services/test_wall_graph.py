@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -50,3 +52,47 @@ def test_chain_follows_the_travel_direction():
 
 def test_no_lines_no_chain():
     assert find_wall_chain([], LayoutParams()) is None
+
+
+def _recess(mouth_seen_through: bool) -> list[WallLine]:
+    """A wall along x at y = 0 (interior +y, x from 0 to 10) with a recess 3 m wide and 2 m
+    deep below it between x = 3.5 and 6.5; the wall line has no evidence across the mouth."""
+    main = _line(0, 0.0, 1, [(0.0, 3.5), (6.5, 10.0)])
+    if mouth_seen_through:
+        # The scan saw floor on both sides of the mouth: no wall stands there.
+        flags = np.zeros_like(main.high)
+        flags[round((3.6 - main.origin) / CELL) : round((6.4 - main.origin) / CELL)] = True
+        main = dataclasses.replace(main, seen_through=flags)
+    return [
+        main,
+        _line(1, 3.5, -1, [(-2.0, 0.0)]),  # down the recess's left side, interior +x
+        _line(0, -2.0, 1, [(3.5, 6.5)]),  # its back, interior +y
+        _line(1, 6.5, 1, [(-2.0, 0.0)]),  # back up its right side, interior -x
+    ]
+
+
+@pytest.mark.parametrize("seen_through", [False, True])
+def test_chain_walks_around_a_recess_instead_of_across_its_mouth(seen_through):
+    # The straight edge along y = 0 is cheaper per the paper's weight (8 of 10 m evidenced,
+    # one edge), but the chain that explains the recess walls is the one that was seen.
+    chain = find_wall_chain(_recess(seen_through), LayoutParams())
+    assert chain is not None
+    expected = np.array([[0, 0], [3.5, 0], [3.5, -2], [6.5, -2], [6.5, 0], [10, 0]], dtype=float)
+    assert np.allclose(chain.keypoints, expected, atol=0.05)
+
+
+def test_no_wall_runs_across_space_seen_on_both_sides():
+    # Only the main wall: across the seen-through mouth the chain must stop, not bridge.
+    chain = find_wall_chain(_recess(True)[:1], LayoutParams())
+    assert chain is not None
+    assert len(chain.keypoints) == 2
+    assert abs(chain.keypoints[-1][0] - chain.keypoints[0][0]) == pytest.approx(3.5, abs=0.1)
+
+
+def test_a_door_seen_through_is_still_bridged():
+    main = _line(0, 1.0, 1, [(0.0, 2.0), (3.0, 6.0)])
+    flags = np.zeros_like(main.high)
+    flags[round((2.0 - main.origin) / CELL) : round((3.0 - main.origin) / CELL)] = True
+    chain = find_wall_chain([dataclasses.replace(main, seen_through=flags)], LayoutParams())
+    assert chain is not None
+    assert np.allclose(chain.keypoints, [[0.0, 1.0], [6.0, 1.0]], atol=0.05)
