@@ -278,6 +278,11 @@ def _explained(bridge: WallLine, lines: list[WallLine], cell: float) -> bool:
 def _bounds_scan(line: WallLine, grid: _Grid) -> bool:
     """True when little was seen behind the (deduced) wall compared to in front of it."""
     run = line.origin + (np.arange(len(line.high)) + 0.5) * line.cell_size
+    # Skip the ends: there the strips run along the walls the line joins, not past it.
+    start, stop = line.origin, line.origin + len(line.high) * line.cell_size
+    run = run[(run > start + _NEAR_STRIP) & (run < stop - _NEAR_STRIP)]
+    if len(run) == 0:
+        return True
     cells = np.floor((run - grid.origin[line.axis]) / grid.cell).astype(np.int64)
     behind, front = grid.strip_sums(line.axis, line.offset, cells)
     interior = line.travel if line.axis == 0 else -line.travel

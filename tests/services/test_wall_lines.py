@@ -71,3 +71,32 @@ def test_runs_bridge_small_gaps_and_drop_short_runs():
     assert _runs(mask, max_gap=2, min_len=3) == [(0, 5), (8, 14)]
     assert _runs(mask, max_gap=0, min_len=3) == [(8, 12)]
     assert _runs(np.zeros(5, dtype=bool), 2, 3) == []
+
+
+def _wall(rng: np.random.Generator, start: tuple[float, float], end: tuple[float, float]):
+    """Points of a 2.6 m high wall from start to end (x, y), 1500 per meter."""
+    n = int(1500 * np.hypot(end[0] - start[0], end[1] - start[1]))
+    t = rng.uniform(0, 1, n)
+    xy = np.asarray(start) + t[:, None] * (np.asarray(end) - np.asarray(start))
+    return np.column_stack([xy, rng.uniform(0, 2.6, n)])
+
+
+def test_hidden_back_of_a_shallow_alcove_is_deduced():
+    # A corridor wall at x = 0 (interior -x) up to y = 0, then an alcove 1 m deep whose back
+    # wall at x = 1 starts at y = 0.1; the alcove's side wall (y = 0, x from 0 to 1) is
+    # hidden. The deduced side wall must be found even though its strips run along the
+    # corridor wall at its ends.
+    rng = np.random.default_rng(3)
+    parts = [_wall(rng, (0.0, -5.0), (0.0, 0.0)), _wall(rng, (1.0, 0.1), (1.0, 2.0))]
+    floor = np.column_stack([rng.uniform(-2, 0, 8000), rng.uniform(-5, 2, 8000), np.zeros(8000)])
+    alcove = np.column_stack([rng.uniform(0, 1, 1500), rng.uniform(0, 2, 1500), np.zeros(1500)])
+    points = np.vstack([*parts, floor, alcove])
+    normals = np.vstack(
+        [
+            np.tile([1.0, 0.0, 0.0], (len(parts[0]) + len(parts[1]), 1)),
+            np.tile([0.0, 0.0, 1.0], (len(floor) + len(alcove), 1)),
+        ]
+    )
+    lines = find_wall_lines(points, normals, 0.0, 2.6, LayoutParams())
+    deduced = [ln for ln in lines if ln.virtual and ln.axis == 0]
+    assert any(abs(ln.offset) < 0.15 for ln in deduced)
