@@ -57,8 +57,9 @@ class LayoutParams(_Frozen):
     min_wall_cells: int = Field(3, ge=1, description="shortest candidate wall segment, cells")
     source_target: Literal["evidence", "spanning_forest"] = Field(
         "evidence",
-        description="how the chain's ends are chosen: the pair whose min-cost path covers the "
-        "most wall for its cost, or the paper's longest path in the ST-graph's spanning forest",
+        description="how the chain is chosen: the simple path that explains the most wall "
+        "evidence less a price per corner, or the paper's min-cost path between the ends of "
+        "the longest path in the ST-graph's spanning forest",
     )
 
 
