@@ -98,7 +98,7 @@ class PlacementParams(_Frozen):
     )
     top_k: int = Field(3, ge=1, description="best placements kept (runners-up in diagnostics)")
     max_search_seconds: float = Field(
-        5.0, gt=0, description="search time before the best found so far is returned, s"
+        4.0, gt=0, description="search time before the best found so far is returned, s"
     )
     max_search_nodes: int = Field(
         8_000, ge=1, description="search nodes before the best found so far is returned"

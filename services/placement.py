@@ -152,8 +152,10 @@ def _boundary_mismatch(a: Piece, b: Piece, turn: int, params: PlacementParams) -
     rb = rot90(turn - b.directions[0])
     pa = np.column_stack([a.target_boundary[:, :2] @ ra.T, a.target_boundary[:, 2]])
     pb = np.column_stack([b.source_boundary[:, :2] @ rb.T, b.source_boundary[:, 2]])
-    d_ab, _ = cKDTree(pb).query(pa)
-    d_ba, _ = cKDTree(pa).query(pb)
+    # Compare the cross-sections in the cutting plane (offset from the wall, height): the
+    # distance along the wall within the band is sampling, not shape.
+    d_ab, _ = cKDTree(pb[:, 1:]).query(pa[:, 1:])
+    d_ba, _ = cKDTree(pa[:, 1:]).query(pb[:, 1:])
     # Phi(d/sigma) - Phi(-d/sigma) = erf(d / (sigma sqrt 2)).
     scores = erf(np.concatenate([d_ab, d_ba]) / (params.boundary_sigma * np.sqrt(2.0)))
     return float(scores.mean())
