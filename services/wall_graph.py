@@ -205,9 +205,8 @@ def _best_path(
     one long, partly evidenced line than follow them; this score follows them. A door or a
     cabinet in front of a wall costs nothing, so a chain is not cut short before the last
     stretch of wall; edges never run far through space seen on both sides of their line
-    (see :meth:`WallLine.crossing_gap`). The paper instead takes
-    the two ends of the longest path in a spanning forest of the keypoints
-    (``source_target="spanning_forest"``).
+    (see :meth:`WallLine.crossing_gap`). The paper instead takes the two ends of the
+    longest path in a spanning forest of the keypoints (``source_target="spanning_forest"``).
 
     The search is label-correcting over (node, arrival axis) states, one best simple path
     per state: a fragment may see closed loops of walls (a recess seen whole), so the
@@ -248,10 +247,12 @@ def _best_path(
         if len(changed) == 0:
             break
         # Paths of the previous round: an update must not read a path changed in this one.
-        before = [paths[2 * int(u[edge_of[s]]) + choice[edge_of[s]] - 1] for s in changed]
-        for updated, prefix in zip(changed, before, strict=True):
-            e = int(edge_of[updated])
-            path = [int(u[e]), int(v[e])] if choice[e] == 0 else [*prefix, int(v[e])]
+        prefixes = [
+            paths[2 * int(u[e]) + choice[e] - 1] if choice[e] else [int(u[e])]
+            for e in edge_of[changed]
+        ]
+        for updated, prefix in zip(changed, prefixes, strict=True):
+            path = [*prefix, int(v[edge_of[updated]])]
             paths[updated] = path
             on_path[updated] = False
             on_path[updated, path] = True
