@@ -110,9 +110,15 @@ def _ransac_plane(
         return np.array([0.0, 0.0, 1.0]), np.zeros(len(points), dtype=bool)
     best = int(np.argmax(counts))
     inliers = np.abs(points @ normals[best] + offsets[best]) < distance
-    centre = points[inliers].mean(axis=0)
-    normal: FloatArray = np.linalg.svd(points[inliers] - centre, full_matrices=False)[2][-1]
+    centre, normal = _fit_plane(points[inliers])
     return normal, np.abs((points - centre) @ normal) < distance
+
+
+def _fit_plane(points: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Least-squares plane through (M, 3) points: (centre, unit normal, sign arbitrary)."""
+    centre: FloatArray = points.mean(axis=0)
+    normal: FloatArray = np.linalg.svd(points - centre, full_matrices=False)[2][-1]
+    return centre, normal
 
 
 def _estimate_up(normals: FloatArray, max_tilt_deg: float, start: FloatArray) -> FloatArray:
@@ -158,9 +164,8 @@ def _refine_up_on_floor(cloud: OrientedCloud, up: FloatArray) -> FloatArray:
         on_floor = cloud.points[near]
         if len(on_floor) < 1000 or np.linalg.eigvalsh(np.cov(on_floor.T))[1] < 0.5:
             return up  # too little floor, or a strip: a plane fit would not fix the tilt
-        centre = on_floor.mean(axis=0)
-        _, _, vt = np.linalg.svd(on_floor - centre, full_matrices=False)
-        normal = vt[2] if vt[2] @ up > 0 else -vt[2]
+        centre, fitted = _fit_plane(on_floor)
+        normal = fitted if fitted @ up > 0 else -fitted
         level = float(centre @ normal)
     if np.degrees(np.arccos(np.clip(normal @ up, -1.0, 1.0))) > 5.0:
         return up  # the plane is not the floor the normals voted for

@@ -77,11 +77,8 @@ class WallLine:
         if flags is None:
             return 0.0
         i0, i1 = self._cells(start, end)
-        window = flags[i0:i1]
-        if not window.any():
-            return 0.0
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], window.astype(np.int8), [0]])))
-        return float((edges[1::2] - edges[::2]).max()) * self.cell_size
+        spans = _runs(flags[i0:i1], max_gap=0, min_len=1)
+        return max((end - start for start, end in spans), default=0) * self.cell_size
 
     def _cells(self, start: float, end: float) -> tuple[int, int]:
         lo, hi = sorted((start, end))
