@@ -289,7 +289,7 @@ def _cut_positions(
     margin = spec.end_margin + 0.5 * max(abs(g) for g in spec.gap_range)
     slots = [e for e in range(room.n_edges) if room.lengths[e] >= 2 * margin + 0.1]
     if spec.straight_fragments:
-        slots += [e for e in slots if room.lengths[e] >= 2 * margin + _MIN_STRAIGHT]
+        slots += [e for e in slots if room.lengths[e] >= 2 * margin + _MIN_STRAIGHT + 0.01]
     n = min(int(rng.integers(spec.n_fragments_range[0], spec.n_fragments_range[1] + 1)), len(slots))
     if n < 2:
         return None

@@ -252,6 +252,22 @@ def test_hard_scenes_allow_straight_fragments_and_tilt():
     assert min(counts) == 2 and max(counts) >= 4
 
 
+def test_edge_exactly_long_enough_for_two_cuts_does_not_break_the_generator():
+    # Seed 70004 draws a 3.8 m edge: exactly two end margins plus a straight stretch, which
+    # rounding once made an empty sampling interval.
+    spec = replace(
+        SceneSpec.paper(),
+        n_fragments_range=(16, 16),
+        n_corners_range=(16, 16),
+        size_range=((14.0, 16.0), (18.0, 20.0)),
+        straight_fragments=True,
+        points_per_fragment=(500, 500),
+        furniture=False,
+    )
+    scene = generate_scene(spec, 70004)
+    assert len(scene.fragments) >= 2
+
+
 def test_stress_rooms_are_large():
     spec = replace(SceneSpec.stress(), points_per_fragment=(3_000, 3_000))
     scene = generate_scene(spec, 0)
