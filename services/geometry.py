@@ -59,8 +59,15 @@ def distance_to_polygon(xy: FloatArray, polygon: FloatArray) -> FloatArray:
     >>> distance_to_polygon(np.array([[1.0, 1.0], [3.0, 1.0]]), square).tolist()
     [1.0, 1.0]
     """
+    following = np.roll(polygon, -1, axis=0)
+    if np.all((polygon[:, 0] == following[:, 0]) | (polygon[:, 1] == following[:, 1])):
+        # Axis-parallel edges (floor plans): the nearest point is the clamped one.
+        lo, hi = np.minimum(polygon, following), np.maximum(polygon, following)
+        offset = xy[:, None, :] - np.clip(xy[:, None, :], lo[None], hi[None])
+        squared: FloatArray = (offset**2).sum(-1).min(axis=1)
+        return np.sqrt(squared)
     a = polygon[None, :, :]
-    ab = np.roll(polygon, -1, axis=0)[None, :, :] - a
+    ab = following[None, :, :] - a
     ap = xy[:, None, :] - a
     t = np.clip((ap * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
     nearest = ap - t[..., None] * ab

@@ -10,7 +10,9 @@ Search is depth-first branch and bound. What a simple rectilinear counter-clockw
 implies cuts the tree: a junction continues the wall or turns by 90 degrees (never folds
 back), so a rotation follows from the junction's turn; the turns of the loop add up to one
 full turn (+4 quarter turns); walls may not cross or overlap; and the closure gap can only
-shrink by as much as the pieces still to place can span.
+shrink by as much as the pieces still to place can span. Quick first passes that expand
+only the best one, two, three children per node (iterative broadening) find good loops
+across the whole tree before the full pass, whose pruning then starts tight.
 """
 
 from __future__ import annotations
@@ -44,6 +46,9 @@ _TURNS = (0, 1, -1)  # continue, turn left (convex corner), turn right (concave 
 _CROSS_EPS = 0.05  # m, walls may touch within this distance but not cross
 _UNPLACED_PENALTY = 100.0  # energy per piece left out of an open chain
 _HULL_TOLERANCE = 0.35  # m, hull vertices closer than this to their chord are dropped
+_BROADENING = (1, 2, 3)  # children per node in the search's quick first passes
+_MAX_FOOTPRINT_CELLS = 128  # per piece, for the outside-share term
+_BEHIND_WALL = 0.3  # m, footprint cells further behind the piece's own wall are dropped
 
 
 def rot90(quarter_turns: int) -> FloatArray:
@@ -93,6 +98,11 @@ class Piece:
         return float(np.abs(self.keypoints[-1]).sum())
 
     @cached_property
+    def rotated_footprint(self) -> tuple[FloatArray, ...]:
+        """Per quarter turn r: the footprint cells rotated by r."""
+        return tuple(self.footprint @ rot90(r).T for r in range(4))
+
+    @cached_property
     def rotated(self) -> tuple[tuple[FloatArray, FloatArray], ...]:
         """Per quarter turn r: the rotated keypoints and their walls (see ``_walls``)."""
         out = []
@@ -109,8 +119,31 @@ def make_piece(fragment_id: str, layout: LocalLayout) -> Piece:
     floor = np.array([0.0, 0.0, layout.frame.floor_z])
     src = layout.source_boundary - np.concatenate([layout.keypoints[0], [0.0]]) - floor
     tgt = layout.target_boundary - np.concatenate([layout.keypoints[-1], [0.0]]) - floor
-    footprint = layout.footprint - layout.keypoints[0]
-    return Piece(fragment_id, kp, dirs, src, tgt, footprint)
+    footprint = _in_front_of_walls(layout.footprint, layout.keypoints) - layout.keypoints[0]
+    # The outside share is scored at every search leaf that could win: a spread sample of
+    # the cells estimates it well enough.
+    stride = max(1, -(-len(footprint) // _MAX_FOOTPRINT_CELLS))
+    return Piece(fragment_id, kp, dirs, src, tgt, footprint[::stride])
+
+
+def _in_front_of_walls(cells: FloatArray, keypoints: FloatArray) -> FloatArray:
+    """The cells not behind one of the chain's own walls.
+
+    Space a scan saw behind its own walls (through a door or window) is outside the room by
+    the scan's own evidence: it cannot tell one placement from another, so it is left out.
+    """
+    if len(cells) == 0 or len(keypoints) < 2:
+        return cells
+    start, end = keypoints[:-1], keypoints[1:]
+    along = end - start
+    length = np.linalg.norm(along, axis=1)
+    unit = along / np.maximum(length, 1e-9)[:, None]
+    rel = cells[:, None, :] - start[None]
+    t = (rel * unit[None]).sum(-1)
+    left = unit[None, :, 0] * rel[..., 1] - unit[None, :, 1] * rel[..., 0]
+    behind = (t > 0) & (t < length[None]) & (left < -_BEHIND_WALL)
+    kept: FloatArray = cells[~behind.any(axis=1)]
+    return kept
 
 
 @dataclass(frozen=True)
@@ -205,6 +238,7 @@ class _Search:
     cheapest_pair: list[list[float]] = field(default_factory=list)
     top: list[tuple[float, int, PlacementCandidate]] = field(default_factory=list)
     deadline: float = float("inf")
+    breadth: int | None = None  # children expanded per node; None: all
     truncated: bool = False
     nodes: int = 0
     counter: itertools.count[int] = field(default_factory=itertools.count)
@@ -227,6 +261,8 @@ class _Search:
         return -self.top[0][0]
 
     def record(self, cand: PlacementCandidate) -> None:
+        if any(c.order == cand.order and c.rotations == cand.rotations for _, _, c in self.top):
+            return  # found again by a later, wider pass
         item = (-cand.energy, next(self.counter), cand)
         if len(self.top) < self.params.top_k:
             heapq.heappush(self.top, item)
@@ -354,23 +390,28 @@ def _outside_share(search: _Search, state: _State) -> float:
     """Summed share of each piece's footprint that falls outside the placed loop.
 
     Footprint cells just outside a wall (within the margin) count as inside: wall
-    thickness, noise and the unrefined junctions put a few there.
+    thickness, noise and the unrefined junctions put a few there. All pieces' cells are
+    tested in one batch: this runs at every leaf that could win.
     """
     polygon = state.vertices
-    total = 0.0
+    cells, owners, sizes = [], [], np.zeros(len(state.order))
     end = np.zeros(2)
-    for index, rotation in zip(state.order, state.rotations, strict=True):
+    for slot, (index, rotation) in enumerate(zip(state.order, state.rotations, strict=True)):
         piece = search.pieces[index]
-        local_pts, _ = piece.rotated[rotation]
-        cells = piece.footprint @ rot90(rotation).T + end
-        end = end + local_pts[-1]
-        if len(cells) == 0:
-            continue
-        outside = ~points_in_polygon(cells, polygon)
-        if outside.any():
-            far = distance_to_polygon(cells[outside], polygon) > search.params.free_space_margin
-            total += float(far.sum()) / len(cells)
-    return total
+        footprint = piece.rotated_footprint[rotation]
+        cells.append(footprint + end)
+        owners.append(np.full(len(footprint), slot))
+        sizes[slot] = len(footprint)
+        end = end + piece.rotated[rotation][0][-1]
+    all_cells = np.concatenate(cells)
+    if len(all_cells) == 0:
+        return 0.0
+    outside = ~points_in_polygon(all_cells, polygon)
+    if not outside.any():
+        return 0.0
+    far = distance_to_polygon(all_cells[outside], polygon) > search.params.free_space_margin
+    counts = np.bincount(np.concatenate(owners)[outside][far], minlength=len(sizes))
+    return float(np.sum(counts[sizes > 0] / sizes[sizes > 0]))
 
 
 def _dfs(search: _Search, state: _State, remaining: tuple[int, ...]) -> None:
@@ -408,12 +449,16 @@ def _dfs(search: _Search, state: _State, remaining: tuple[int, ...]) -> None:
         )
         ranked.append((bound, j, turn))
     ranked.sort(key=lambda item: item[0])
+    expanded = 0
     for bound, j, turn in ranked:
         if bound >= search.bound() or search.out_of_budget():
             return
         child = _extend(search, state, j, turn)
         if child is not None:
             _dfs(search, child, tuple(i for i in remaining if i != j))
+            expanded += 1
+            if search.breadth is not None and expanded >= search.breadth:
+                return
 
 
 def _options(search: _Search, state: _State, remaining: tuple[int, ...]) -> list[tuple[int, int]]:
@@ -515,7 +560,13 @@ def place_pieces(
         search = _Search(list(pieces), params, mismatch, successor, predecessor, require_closed)
         search.cheapest_pair = _cheapest_pairs(mismatch, n)
         search.deadline = deadline
-        _dfs(search, root, tuple(range(1, n)))
+        # Iterative broadening: cheap passes that follow only the most promising children
+        # spread good incumbents over the whole tree, so the full pass prunes early.
+        for breadth in (*_BROADENING, None):
+            search.breadth = breadth
+            _dfs(search, root, tuple(range(1, n)))
+            if search.truncated:
+                break
         nodes += search.nodes
         if search.top:
             break

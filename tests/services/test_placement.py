@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 
 import numpy as np
 import pytest
 
 from schemas.params import PlacementParams
-from services.placement import evaluate_placement, place_pieces
+from services.placement import evaluate_placement, make_piece, place_pieces
+from services.types import LocalLayout, ManhattanFrame
 from tests.conftest import chains_from_polygon
 
 pytestmark = pytest.mark.timeout(120)
@@ -119,3 +121,45 @@ def test_invalid_placements_are_rejected(l_room):
     assert evaluate_placement(pieces, ["p1", "p0", "p2", "p3"], [0, 0, 0, 0]) is None
     # Folding a piece back onto the previous wall (a 180 degree junction) is not a loop.
     assert evaluate_placement(pieces, ["p0", "p1", "p2", "p3"], [0, 2, 0, 0]) is None
+
+
+def test_alternatives_are_distinct_placements(l_room):
+    # The quick broadening passes and the full pass meet the same leaves: each is kept once.
+    pieces = chains_from_polygon(l_room, [1.0, 9.5, 14.0, 20.0, 25.5], [0, 1, 2, 3, 1])
+    placement = place_pieces(pieces, PlacementParams(top_k=5))
+    assert placement is not None
+    keys = [(c.order, c.rotations) for c in (placement.best, *placement.alternatives)]
+    assert len(keys) == len(set(keys)) == 5
+
+
+def _grid(x0: float, x1: float, y0: float, y1: float) -> np.ndarray:
+    xs, ys = np.meshgrid(np.arange(x0, x1, 0.25), np.arange(y0, y1, 0.25))
+    return np.column_stack([xs.ravel(), ys.ravel()])
+
+
+def test_space_seen_behind_the_fragments_own_wall_is_not_footprint():
+    # A wall along +x at y = 0 (interior above it); the scan also saw floor through a door,
+    # 1 to 2 m behind the wall: that space is outside the room by the scan's own evidence.
+    frame = ManhattanFrame(rotation=np.eye(3), floor_z=0.0, ceiling_z=None)
+    front, behind = _grid(0.1, 4.0, 0.1, 2.0), _grid(1.0, 3.0, -2.0, -1.0)
+    layout = LocalLayout(
+        keypoints=np.array([[0.0, 0.0], [4.0, 0.0]]),
+        frame=frame,
+        footprint=np.vstack([front, behind]),
+    )
+    piece = make_piece("f", layout)
+    assert len(piece.footprint) == len(front)
+    assert piece.footprint[:, 1].min() > 0.0
+
+
+def test_free_space_counts_the_share_of_scanned_floor_outside_the_room(l_room):
+    pieces = chains_from_polygon(l_room, [1.0, 9.5, 14.0, 20.0], [0, 0, 0, 0])
+    order, rotations = ["p0", "p1", "p2", "p3"], [0, 0, 0, 0]
+    # p0 starts at (1, 0) on the bottom wall: cells relative to its source.
+    inside, outside = _grid(0.5, 2.5, 0.5, 2.5), _grid(-4.0, -2.0, 0.5, 2.5)
+    params = PlacementParams(use_boundary=False)
+    for cells, share in ((inside, 0.0), (np.vstack([inside, outside]), 0.5)):
+        scanned = [dataclasses.replace(pieces[0], footprint=cells), *pieces[1:]]
+        cand = evaluate_placement(scanned, order, rotations, params)
+        assert cand is not None
+        assert cand.free_space == pytest.approx(share)

@@ -1,0 +1,30 @@
+"""Polygon helpers: inside test and distance to the boundary, checked against dense sampling."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from services.geometry import distance_to_polygon, points_in_polygon
+
+L_ROOM = np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], dtype=np.float64)
+SLANTED = np.array([[0, 0], [6, 1], [5, 5], [1, 4]], dtype=np.float64)
+
+
+def _sampled_distance(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    following = np.roll(polygon, -1, axis=0)
+    t = np.linspace(0.0, 1.0, 2001)[:, None, None]
+    boundary = (polygon[None] + t * (following - polygon)[None]).reshape(-1, 2)
+    return np.linalg.norm(points[:, None, :] - boundary[None], axis=2).min(axis=1)
+
+
+@pytest.mark.parametrize("polygon", [L_ROOM, SLANTED], ids=["rectilinear", "slanted"])
+def test_distance_matches_dense_boundary_sampling(polygon):
+    points = np.random.default_rng(3).uniform(-3.0, 11.0, size=(400, 2))
+    expected = _sampled_distance(points, polygon)
+    assert np.allclose(distance_to_polygon(points, polygon), expected, atol=5e-3)
+
+
+def test_inside_test_on_an_l_shaped_room():
+    points = np.array([[1.0, 1.0], [7.0, 2.0], [7.0, 5.0], [-1.0, 1.0], [4.0, 5.5]])
+    assert points_in_polygon(points, L_ROOM).tolist() == [True, True, False, False, True]
