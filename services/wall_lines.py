@@ -149,7 +149,7 @@ class _Grid:
 
     origin: FloatArray  # (2,) x, y of cell (0, 0)'s lower corner
     cell: float
-    occupancy: NDArray[np.int64]  # (nx, ny) thinned points per column, any height
+    occupancy: NDArray[np.int64]  # (nx, ny) thinned horizontal-surface points per column
 
     def strip_sums(self, axis: int, offset: float, cells: NDArray[np.int64]) -> FloatArray:
         """Occupancy in the strips on the negative and positive side of a line, per cell.
@@ -172,11 +172,13 @@ class _Grid:
         return np.vstack([band(-_FAR_STRIP, -_NEAR_STRIP), band(_NEAR_STRIP, _FAR_STRIP)])
 
 
-def _make_grid(xy: FloatArray, cell: float) -> _Grid:
+def _make_grid(xy: FloatArray, cell: float, counted: NDArray[np.bool_]) -> _Grid:
+    """The projection grid over all points; occupancy counts the ``counted`` ones."""
     origin = np.floor(xy.min(axis=0) / cell) * cell - 2 * _FAR_STRIP
     ij = ((xy - origin) / cell).astype(np.int64)
     margin = int(3 * _FAR_STRIP / cell)
     shape = (int(ij[:, 0].max()) + 1 + margin, int(ij[:, 1].max()) + 1 + margin)
+    ij = ij[counted]
     flat = np.bincount(ij[:, 0] * shape[1] + ij[:, 1], minlength=shape[0] * shape[1])
     occupancy = flat.reshape(shape).astype(np.int64)
     return _Grid(origin=origin, cell=cell, occupancy=occupancy)
@@ -326,7 +328,11 @@ def find_wall_lines(
     top = ceiling_z if ceiling_z is not None else float(np.percentile(aligned[:, 2], 99.5))
     in_band = (aligned[:, 2] > floor_z + 0.1) & (aligned[:, 2] < top - 0.1)
     band = max(top - floor_z - 0.2, params.cell_size)
-    grid = _make_grid(aligned[:, :2], params.cell_size)
+    # Scanned space is told by points on horizontal surfaces (floor, ceiling, table tops):
+    # stray points (outliers, reflections) have no consistent normal, and a wall's far
+    # face standing behind it is not space the scanner saw.
+    horizontal = np.abs(normals[:, 2]) > np.cos(np.radians(25.0))
+    grid = _make_grid(aligned[:, :2], params.cell_size, horizontal)
     columns = ((aligned[in_band, :2] - grid.origin) / params.cell_size).astype(np.int64)
     z_bins = ((aligned[in_band, 2] - floor_z) / params.cell_size).astype(np.int64)
     keys = np.unique((columns[:, 0] * grid.occupancy.shape[1] + columns[:, 1]) * 4096 + z_bins)

@@ -50,6 +50,25 @@ def test_finds_both_walls_with_their_interior_side():
     assert by_axis[1].travel == 1
 
 
+def test_stray_points_behind_a_wall_do_not_hide_it():
+    # Outliers (and reflections) scattered behind both walls, with random normals, as many
+    # per column as the floor has: the walls must still bound the scanned space.
+    rng = np.random.default_rng(4)
+    points, normals = _box_room(rng)
+    stray = np.column_stack(
+        [rng.uniform(-1.0, 7.0, 16000), rng.uniform(-1.0, 5.0, 16000), rng.uniform(0, 2.6, 16000)]
+    )
+    behind = (stray[:, 1] < -0.15) | (stray[:, 0] > 6.15)
+    directions = rng.normal(size=(int(behind.sum()), 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    points = np.vstack([points, stray[behind]])
+    normals = np.vstack([normals, directions])
+    lines = [
+        ln for ln in find_wall_lines(points, normals, 0.0, 2.6, LayoutParams()) if not ln.virtual
+    ]
+    assert {(ln.axis, round(ln.offset)) for ln in lines} >= {(0, 0), (1, 6)}
+
+
 def test_short_furniture_is_not_a_wall():
     points, normals = _box_room(np.random.default_rng(1), furniture=True)
     lines = find_wall_lines(points, normals, 0.0, 2.6, LayoutParams())
