@@ -101,7 +101,7 @@ class PlacementParams(_Frozen):
         4.0, gt=0, description="search time before the best found so far is returned, s"
     )
     max_search_nodes: int = Field(
-        8_000, ge=1, description="search nodes before the best found so far is returned"
+        100_000, ge=1, description="search nodes before the best found so far is returned"
     )
 
 

@@ -10,9 +10,10 @@ Search is depth-first branch and bound. What a simple rectilinear counter-clockw
 implies cuts the tree: a junction continues the wall or turns by 90 degrees (never folds
 back), so a rotation follows from the junction's turn; the turns of the loop add up to one
 full turn (+4 quarter turns); walls may not cross or overlap; and the closure gap can only
-shrink by as much as the pieces still to place can span. Quick first passes that expand
-only the best one, two, three children per node (iterative broadening) find good loops
-across the whole tree before the full pass, whose pruning then starts tight.
+shrink by as much as the pieces still to place can reach, direction by direction. Quick
+first passes that expand only the best one, two, three children per node (iterative
+broadening) find good loops across the whole tree before the full pass, whose pruning then
+starts tight.
 """
 
 from __future__ import annotations
@@ -46,6 +47,11 @@ _TURNS = (0, 1, -1)  # continue, turn left (convex corner), turn right (concave 
 _CROSS_EPS = 0.05  # m, walls may touch within this distance but not cross
 _UNPLACED_PENALTY = 100.0  # energy per piece left out of an open chain
 _HULL_TOLERANCE = 0.35  # m, hull vertices closer than this to their chord are dropped
+# Directions u (max-norm 1) of the closure bound: the gap left is at least u . (-end) less
+# what the pieces still to place can reach along u (L1 distance to a convex set, by duality).
+_CLOSURE_DIRECTIONS = np.array(
+    [d for t in (-1.0, -0.5, 0.0, 0.5) for d in ((1.0, t), (-1.0, -t), (-t, 1.0), (t, -1.0))]
+)
 _BROADENING = (1, 2, 3)  # children per node in the search's quick first passes
 _MAX_FOOTPRINT_CELLS = 128  # per piece, for the outside-share term
 _BEHIND_WALL = 0.3  # m, footprint cells further behind the piece's own wall are dropped
@@ -93,9 +99,12 @@ class Piece:
         return len(self.keypoints) - 2
 
     @cached_property
-    def span_l1(self) -> float:
-        """Manhattan length of source->target; unchanged by quarter-turn rotations."""
-        return float(np.abs(self.keypoints[-1]).sum())
+    def reach(self) -> FloatArray:
+        """(D,) support of the piece's source->target vector over its four rotations, in
+        each of the closure bound's directions: how far it can move the loop's end."""
+        ends = np.stack([rot90(r) @ self.keypoints[-1] for r in range(4)])
+        support: FloatArray = (_CLOSURE_DIRECTIONS @ ends.T).max(axis=1)
+        return support
 
     @cached_property
     def rotated_footprint(self) -> tuple[FloatArray, ...]:
@@ -236,12 +245,16 @@ class _Search:
     predecessor: dict[int, int]
     require_closed: bool
     cheapest_pair: list[list[float]] = field(default_factory=list)
+    reach: FloatArray = field(init=False)  # (n, D) each piece's reach (Piece.reach)
     top: list[tuple[float, int, PlacementCandidate]] = field(default_factory=list)
     deadline: float = float("inf")
     breadth: int | None = None  # children expanded per node; None: all
     truncated: bool = False
     nodes: int = 0
     counter: itertools.count[int] = field(default_factory=itertools.count)
+
+    def __post_init__(self) -> None:
+        self.reach = np.array([p.reach for p in self.pieces]).reshape(len(self.pieces), -1)
 
     def out_of_budget(self) -> bool:
         """True once the node or time budget is spent (the best so far is then returned)."""
@@ -426,7 +439,6 @@ def _dfs(search: _Search, state: _State, remaining: tuple[int, ...]) -> None:
             return
     pieces = search.pieces
     w_l, w_c, w_b = search.weights()
-    span = sum(pieces[i].span_l1 for i in remaining)
     turning = state.turning + sum(pieces[i].turning for i in remaining)
     corners = state.corners + sum(pieces[i].corners for i in remaining)
     # Cheapest way into each piece left (and into the loop's start) from a piece that can
@@ -434,12 +446,19 @@ def _dfs(search: _Search, state: _State, remaining: tuple[int, ...]) -> None:
     sources = (state.order[-1], *remaining)
     entry = {b: min(search.cheapest_pair[a][b] for a in sources if a != b) for b in (*remaining, 0)}
     entry_total = sum(entry.values())
+    options = _options(search, state, remaining)
+    if not options:
+        return
+    # Closure bound of every child at once: its end, and what the others left can reach.
+    reach = search.reach[list(remaining)].sum(axis=0)
+    rotations = [(state.heading + turn - pieces[j].directions[0]) % 4 for j, turn in options]
+    ends = state.end + np.array(
+        [pieces[j].rotated[r][0][-1] for (j, _), r in zip(options, rotations, strict=True)]
+    )
+    others = reach[None, :] - search.reach[[j for j, _ in options]]
+    closures = np.maximum(0.0, (-(ends @ _CLOSURE_DIRECTIONS.T) - others).max(axis=1))
     ranked = []
-    for j, turn in _options(search, state, remaining):
-        piece = pieces[j]
-        rotation = (state.heading + turn - piece.directions[0]) % 4
-        end = state.end + piece.rotated[rotation][0][-1]
-        closure = max(0.0, abs(float(end[0])) + abs(float(end[1])) - (span - piece.span_l1))
+    for (j, turn), closure in zip(options, closures.tolist(), strict=True):
         owed = abs(4 - turning - turn) if search.require_closed else 0
         joined = state.boundary + search.mismatch[(state.order[-1], j, turn)]
         bound = (

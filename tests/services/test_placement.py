@@ -9,7 +9,14 @@ import numpy as np
 import pytest
 
 from schemas.params import PlacementParams
-from services.placement import evaluate_placement, make_piece, place_pieces
+from services.placement import (
+    _CLOSURE_DIRECTIONS,
+    Piece,
+    evaluate_placement,
+    make_piece,
+    place_pieces,
+    rot90,
+)
 from services.types import LocalLayout, ManhattanFrame
 from tests.conftest import chains_from_polygon
 
@@ -163,3 +170,19 @@ def test_free_space_counts_the_share_of_scanned_floor_outside_the_room(l_room):
         cand = evaluate_placement(scanned, order, rotations, params)
         assert cand is not None
         assert cand.free_space == pytest.approx(share)
+
+
+def test_reach_bounds_where_a_rotated_piece_can_move_the_loops_end():
+    # An L of two 2 m walls: its end moves 2 m along an axis but 4 m along a diagonal.
+    empty3, empty2 = np.zeros((0, 3)), np.zeros((0, 2))
+    corner = Piece(
+        "l", np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]]), (0, 1), empty3, empty3, empty2
+    )
+    directions = map(tuple, _CLOSURE_DIRECTIONS.tolist())
+    reach = dict(zip(directions, corner.reach.tolist(), strict=True))
+    assert reach[(1.0, 0.0)] == pytest.approx(2.0)
+    assert reach[(1.0, 1.0)] == pytest.approx(4.0)
+    # Never less than any rotation actually reaches (the bound stays a lower bound).
+    for r in range(4):
+        moved = rot90(r) @ corner.keypoints[-1]
+        assert np.all(_CLOSURE_DIRECTIONS @ moved <= corner.reach + 1e-12)
