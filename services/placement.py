@@ -185,13 +185,18 @@ class Placement:
     closed: bool
 
 
-def _boundary_mismatch(a: Piece, b: Piece, turn: int, params: PlacementParams) -> float:
-    """Supplementary's mismatch score of b's head placed after a's tail with ``turn``."""
+def _boundary_mismatch(a: Piece, b: Piece, params: PlacementParams) -> float:
+    """Supplementary's mismatch score of b's head placed after a's tail.
+
+    Each cross-section is read in its own cutting plane: offset from its own wall towards
+    the interior, and height. A junction that turns (the cut fell at a corner) compares the
+    two profiles the same way as a straight one; the corner itself is priced by E_l.
+    """
     if min(len(a.target_boundary), len(b.source_boundary)) < params.min_boundary_points:
         return 0.5
-    # Common frame: a's last wall along +x, the junction at the origin.
+    # Each piece's end wall along +x, the chain end at the origin, the interior towards +y.
     ra = rot90(-a.directions[-1])
-    rb = rot90(turn - b.directions[0])
+    rb = rot90(-b.directions[0])
     pa = np.column_stack([a.target_boundary[:, :2] @ ra.T, a.target_boundary[:, 2]])
     pb = np.column_stack([b.source_boundary[:, :2] @ rb.T, b.source_boundary[:, 2]])
     # Compare the cross-sections in the cutting plane (offset from the wall, height): the
@@ -501,15 +506,12 @@ def _options(search: _Search, state: _State, remaining: tuple[int, ...]) -> list
 def _all_mismatches(
     pieces: Sequence[Piece], params: PlacementParams
 ) -> dict[tuple[int, int, int], float]:
-    """Boundary mismatch of every ordered pair and junction turn."""
+    """Boundary mismatch of every ordered pair, keyed by junction turn as well (the score
+    does not depend on the turn; the search looks it up per junction)."""
     n = len(pieces)
-    return {
-        (a, b, t): _boundary_mismatch(pieces[a], pieces[b], t, params)
-        for a in range(n)
-        for b in range(n)
-        for t in _TURNS
-        if a != b or n == 1
-    }
+    pairs = [(a, b) for a in range(n) for b in range(n) if a != b or n == 1]
+    scores = {pair: _boundary_mismatch(pieces[pair[0]], pieces[pair[1]], params) for pair in pairs}
+    return {(a, b, t): scores[(a, b)] for a, b in pairs for t in _TURNS}
 
 
 def _root(first: Piece, params: PlacementParams) -> _State:

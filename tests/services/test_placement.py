@@ -12,6 +12,7 @@ from schemas.params import PlacementParams
 from services.placement import (
     _CLOSURE_DIRECTIONS,
     Piece,
+    _boundary_mismatch,
     evaluate_placement,
     make_piece,
     place_pieces,
@@ -186,3 +187,30 @@ def test_reach_bounds_where_a_rotated_piece_can_move_the_loops_end():
     for r in range(4):
         moved = rot90(r) @ corner.keypoints[-1]
         assert np.all(_CLOSURE_DIRECTIONS @ moved <= corner.reach + 1e-12)
+
+
+def _profile(rng: np.random.Generator, interior: tuple[float, float]) -> np.ndarray:
+    """Boundary points of a plain wall with floor: (M, 3), the wall through the origin,
+    the interior towards ``interior``; 10 cm thick band along the wall."""
+    offset = np.concatenate([np.zeros(300), rng.uniform(0.0, 2.0, 300)])
+    height = np.concatenate([rng.uniform(0.0, 2.5, 300), np.zeros(300)])
+    along = rng.uniform(-0.1, 0.1, 600)
+    normal = np.asarray(interior)
+    wall = np.array([normal[1], -normal[0]])
+    xy = offset[:, None] * normal + along[:, None] * wall
+    return np.column_stack([xy, height])
+
+
+def test_boundary_mismatch_reads_each_profile_in_its_own_cutting_plane():
+    # a ends on a wall along +x (interior +y); b starts on a wall along +y (interior -x),
+    # as when the cut fell at a corner. The two profiles are the same wall-and-floor shape.
+    rng = np.random.default_rng(5)
+    empty3, empty2 = np.zeros((0, 3)), np.zeros((0, 2))
+    a = Piece("a", np.array([[-2.0, 0.0], [0.0, 0.0]]), (0,), empty3, _profile(rng, (0, 1)), empty2)
+    b = Piece("b", np.array([[0.0, 0.0], [0.0, 2.0]]), (1,), _profile(rng, (-1, 0)), empty3, empty2)
+    straight = Piece("c", a.keypoints, (0,), _profile(rng, (0, 1)), empty3, empty2)
+    params = PlacementParams()
+    assert _boundary_mismatch(a, b, params) == pytest.approx(
+        _boundary_mismatch(a, straight, params), abs=0.05
+    )
+    assert _boundary_mismatch(a, b, params) < 0.2
