@@ -33,6 +33,7 @@ __all__ = [
 
 _Range = tuple[float, float]
 _MIN_STRAIGHT = 2.5  # shortest stretch that sees a single straight wall
+_CORNER_GAP = (0.1, 0.4)  # m, unseen wall around a corner where a cut falls on it
 
 
 @dataclass(frozen=True)
@@ -43,8 +44,10 @@ class SceneSpec:
     at random). ceiling_fraction: ceiling reach as a fraction of the fragment's floor reach.
     end_margin: plain wall (no opening, no furniture) at both ends of every stretch.
     straight_fragments: allow fragments that see one straight wall only (else every stretch
-    spans at least one corner). density_falloff, scanner_spacing, patch_gain_range,
-    oversample: see :class:`services.synthetic_scan.ScanStyle`.
+    spans at least one corner). corner_cut_share: share of cuts moved onto a room corner,
+    which then lies in the unseen gap between the two neighbours (their junction turns).
+    density_falloff, scanner_spacing, patch_gain_range, oversample: see
+    :class:`services.synthetic_scan.ScanStyle`.
     """
 
     n_corners_range: tuple[int, int] = (4, 16)
@@ -66,6 +69,7 @@ class SceneSpec:
     min_edge: float = 0.8
     end_margin: float = 0.5
     straight_fragments: bool = False
+    corner_cut_share: float = 0.0
     density_falloff: float = 1.0
     scanner_spacing: float = 6.0
     patch_gain_range: _Range = (1.0, 3.0)
@@ -303,7 +307,29 @@ def _cut_positions(
             first = rng.uniform(margin, length - margin - _MIN_STRAIGHT)
             ts = [first, rng.uniform(first + _MIN_STRAIGHT, length - margin)]
         cuts += [(int(e), float(t), float(rng.uniform(*spec.gap_range))) for t in ts]
-    return sorted(cuts, key=lambda c: room.arcs[c[0]] + c[1])
+    cuts = sorted(cuts, key=lambda c: room.arcs[c[0]] + c[1])
+    if spec.corner_cut_share > 0.0:
+        cuts = _cuts_at_corners(rng, spec, room, cuts)
+    return cuts
+
+
+def _cuts_at_corners(
+    rng: np.random.Generator, spec: SceneSpec, room: Room, cuts: list[tuple[int, float, float]]
+) -> list[tuple[int, float, float]]:
+    """Move a share of the cuts onto the corner that starts their edge, with a gap that
+    hides the corner. Only cuts alone on their edge whose previous cut is two or more edges
+    back move, so both neighbouring stretches keep a corner of their own."""
+    edges = [e for e, _, _ in cuts]
+    out = []
+    for k, (e, t, gap) in enumerate(cuts):
+        previous = edges[k - 1]
+        alone = edges.count(e) == 1
+        far = (e - previous) % room.n_edges >= 2 or len(cuts) == 1
+        if rng.random() < spec.corner_cut_share and alone and far:
+            out.append((e, 0.0, float(rng.uniform(_CORNER_GAP[0], _CORNER_GAP[1]))))
+        else:
+            out.append((e, t, gap))
+    return out
 
 
 def _stretches(room: Room, cuts: list[tuple[int, float, float]]) -> list[Stretch]:

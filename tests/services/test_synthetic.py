@@ -268,6 +268,21 @@ def test_edge_exactly_long_enough_for_two_cuts_does_not_break_the_generator():
     assert len(scene.fragments) >= 2
 
 
+def test_cuts_can_fall_on_corners():
+    # A corner then lies in the unseen gap between two neighbours: one ends just before it,
+    # the next starts just after it on the perpendicular wall.
+    spec = replace(SceneSpec.paper(), corner_cut_share=1.0, points_per_fragment=(500, 500))
+    starts_at_corner = 0
+    for seed in range(6):
+        scene = generate_scene(spec, seed)
+        for fragment in scene.fragments:
+            start = fragment.keypoints_world[0]
+            nearest = np.linalg.norm(scene.polygon - start, axis=1).min()
+            assert nearest >= 0.05 - 1e-9  # the corner itself stays unseen
+            starts_at_corner += nearest <= 0.2 + 1e-9
+    assert starts_at_corner >= 3
+
+
 def test_stress_rooms_are_large():
     spec = replace(SceneSpec.stress(), points_per_fragment=(3_000, 3_000))
     scene = generate_scene(spec, 0)
