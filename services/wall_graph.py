@@ -21,7 +21,7 @@ from services.wall_lines import WallLine
 
 __all__ = ["WallChain", "find_wall_chain"]
 
-_CORNER_REACH = 2.0  # m, how far past a segment's end a deduced corner may lie
+_CORNER_REACH = 3.0  # m, how far past a segment's end a deduced corner may lie
 _OCCLUSION_REACH = 3.0  # m, longest gap the ST-graph links across on one line
 _MAX_OPEN_GAP = 0.5  # m, longest stretch a wall may run with nothing scanned beside it
 _MAX_DOORWAY = 2.0  # m, longest stretch a wall may run with space seen on both sides

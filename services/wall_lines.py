@@ -77,7 +77,9 @@ class WallLine:
         if flags is None:
             return 0.0
         i0, i1 = self._cells(start, end)
-        spans = _runs(flags[i0:i1], max_gap=0, min_len=1)
+        # A stray cell or two (a sparse patch, a lone outlier) does not interrupt a gap, as
+        # it does not interrupt a wall.
+        spans = _runs(flags[i0:i1], max_gap=_MAX_GAP_CELLS, min_len=1)
         return max((end - start for start, end in spans), default=0) * self.cell_size
 
     def _cells(self, start: float, end: float) -> tuple[int, int]:
@@ -211,7 +213,10 @@ def _lines_from_peak(
     origin = grid.origin[axis]
     cells = ((members[:, axis] - origin) / s).astype(np.int64)
     z_bins = np.clip(((members[:, 2] - rule.floor_z) / s).astype(np.int64), 0, 4095)
-    n_cells = int(cells.max()) + 1
+    # The flags cover the whole grid along the line, not just its points' extent: a path
+    # may follow the line past its last segment (to a deduced corner), and the gap tests
+    # must see what lies there.
+    n_cells = max(int(cells.max()) + 1, grid.occupancy.shape[axis])
     keys = np.unique(cells * 4096 + z_bins)
     reach = np.zeros(n_cells, dtype=np.int64)
     np.maximum.at(reach, keys // 4096, keys % 4096)

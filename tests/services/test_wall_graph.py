@@ -34,6 +34,14 @@ def test_l_shaped_chain_with_an_occluded_corner(rule):
     assert np.allclose(chain.keypoints, [[0.0, 0.0], [5.0, 0.0], [5.0, 3.0]], atol=0.05)
 
 
+def test_corner_hidden_behind_a_wide_wardrobe_is_deduced():
+    # As above, but a 2.5 m wardrobe in the corner hides the wall along y up to y = 2.5.
+    lines = [_line(0, 0.0, 1, [(0.0, 4.4)]), _line(1, 5.0, 1, [(2.5, 5.0)])]
+    chain = find_wall_chain(lines, LayoutParams())
+    assert chain is not None
+    assert np.allclose(chain.keypoints, [[0.0, 0.0], [5.0, 0.0], [5.0, 5.0]], atol=0.05)
+
+
 def test_gap_of_a_door_stays_one_wall():
     lines = [_line(0, 1.0, 1, [(0.0, 2.0), (3.0, 6.0)])]
     chain = find_wall_chain(lines, LayoutParams())

@@ -69,6 +69,33 @@ def test_stray_points_behind_a_wall_do_not_hide_it():
     assert {(ln.axis, round(ln.offset)) for ln in lines} >= {(0, 0), (1, 6)}
 
 
+def test_gap_tests_see_past_the_last_segment():
+    # A wall along x at y = 0 seen from x = 0 to 3, then open floor on both sides of its
+    # line up to x = 6: a path following the line on (to a deduced corner) would cross it.
+    rng = np.random.default_rng(6)
+    x, z = rng.uniform(0, 3, 4000), rng.uniform(0, 2.6, 4000)
+    wall = np.column_stack([x, np.zeros_like(x), z])
+    floor = np.column_stack([rng.uniform(0, 6, 12000), rng.uniform(-3, 4, 12000), np.zeros(12000)])
+    floor = floor[(floor[:, 0] > 3.2) | (floor[:, 1] > 0.0)]
+    points = np.vstack([wall, floor])
+    normals = np.vstack(
+        [np.tile([0.0, 1.0, 0.0], (len(wall), 1)), np.tile([0, 0, 1.0], (len(floor), 1))]
+    )
+    lines = [
+        ln for ln in find_wall_lines(points, normals, 0.0, 2.6, LayoutParams()) if ln.axis == 0
+    ]
+    assert len(lines) == 1 and lines[0].segments[-1, 1] < 3.1
+    assert lines[0].crossing_gap(3.0, 6.0) > 2.0
+    # A cell with too few points behind the line (a sparse patch) does not split the gap.
+    patch = (floor[:, 0] > 4.5) & (floor[:, 0] < 4.58) & (floor[:, 1] < 0.0)
+    sparse = np.vstack([wall, floor[~patch]])
+    normals = normals[np.concatenate([np.ones(len(wall), bool), ~patch])]
+    lines = [
+        ln for ln in find_wall_lines(sparse, normals, 0.0, 2.6, LayoutParams()) if ln.axis == 0
+    ]
+    assert lines[0].crossing_gap(3.0, 6.0) > 2.0
+
+
 def test_short_furniture_is_not_a_wall():
     points, normals = _box_room(np.random.default_rng(1), furniture=True)
     lines = find_wall_lines(points, normals, 0.0, 2.6, LayoutParams())
