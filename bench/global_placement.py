@@ -1,7 +1,7 @@
 """Benchmark of the global stage (paper section 4, Tables 1 and 3): ACC_global, pose errors,
 layout error, room IoU and time of placement + refinement on paper-like scenes; the FPFH
 chaining baseline on the same scenes; the ablation of the three energy terms; the time of
-16-fragment scenes.
+16-fragment scenes; paper-like scenes cut on room corners.
 
 Run ``python bench/global_placement.py`` (``--quick`` for a small run, ``--scenes N``).
 Scenes are :meth:`SceneSpec.paper` with fixed seeds. Local layouts are computed once per scene
@@ -40,7 +40,7 @@ from services.types import FloatArray, LocalLayout
 
 __all__ = ["SceneRun", "main"]
 
-SEED_BASE, BIG_SEED_BASE = 60_000, 70_000
+SEED_BASE, BIG_SEED_BASE, CORNER_SEED_BASE = 60_000, 70_000, 91_000
 ABLATIONS = {
     "w/o closure term": PlacementParams(use_closure=False),
     "w/o complexity term": PlacementParams(use_complexity=False),
@@ -65,6 +65,11 @@ def big_spec() -> SceneSpec:
         size_range=((14.0, 16.0), (18.0, 20.0)),
         straight_fragments=True,
     )
+
+
+def corner_spec() -> SceneSpec:
+    """Paper-like scenes whose cuts fall on room corners where they can (junctions turn)."""
+    return dataclasses.replace(SceneSpec.paper(), corner_cut_share=1.0)
 
 
 @dataclass
@@ -277,6 +282,9 @@ def _arguments(argv: list[str] | None) -> argparse.Namespace:
     )
     parser.add_argument("--baseline-voxel", type=float, default=0.1, help="FPFH voxel, m")
     parser.add_argument("--big-scenes", type=int, help="16-fragment scenes (default 2, quick 1)")
+    parser.add_argument(
+        "--corner-scenes", type=int, help="scenes cut on corners (default 10, quick 2)"
+    )
     parser.add_argument("--no-ablation", action="store_true", help="skip Table 3")
     return parser.parse_args(argv)
 
@@ -287,6 +295,7 @@ def main(argv: list[str] | None = None) -> int:
     n_scenes = args.scenes if args.scenes is not None else (6 if args.quick else 40)
     n_base = args.baseline_scenes if args.baseline_scenes is not None else (1 if args.quick else 8)
     n_big = args.big_scenes if args.big_scenes is not None else (1 if args.quick else 2)
+    n_corner = args.corner_scenes if args.corner_scenes is not None else (2 if args.quick else 10)
     console = Console(width=None if sys.stdout.isatty() else 120)
     register = _registration() if n_base > 0 else None
     started = time.perf_counter()
@@ -305,6 +314,11 @@ def main(argv: list[str] | None = None) -> int:
         console.print(baseline_table(compared, args.baseline_voxel))
     if not args.no_ablation:
         console.print(ablation_table(runs))
+    corner = [
+        run_scene(corner_spec(), CORNER_SEED_BASE + k, False, None, 0.0) for k in range(n_corner)
+    ]
+    if corner:
+        console.print(summary_table(corner, f"Cuts on corners (seeds {CORNER_SEED_BASE}+)"))
     big = [run_scene(big_spec(), BIG_SEED_BASE + k, False, None, 0.0) for k in range(n_big)]
     if big:
         console.print(big_table(big))
