@@ -245,11 +245,10 @@ def _hull_edges(points: FloatArray) -> int:
 class _Search:
     pieces: list[Piece]
     params: PlacementParams
-    mismatch: dict[tuple[int, int, int], float]
+    mismatch: list[list[float]]  # [a][b]: boundary mismatch of b following a
     successor: dict[int, int]
     predecessor: dict[int, int]
     require_closed: bool
-    cheapest_pair: list[list[float]] = field(default_factory=list)
     reach: FloatArray = field(init=False)  # (n, D) each piece's reach (Piece.reach)
     top: list[tuple[float, int, PlacementCandidate]] = field(default_factory=list)
     deadline: float = float("inf")
@@ -366,7 +365,7 @@ def _extend(search: _Search, state: _State, j: int, turn: int) -> _State | None:
         heading=(piece.directions[-1] + rotation) % 4,
         turning=state.turning + turn + piece.turning,
         corners=state.corners + (turn != 0) + piece.corners,
-        boundary=state.boundary + search.mismatch[(state.order[-1], j, turn)],
+        boundary=state.boundary + search.mismatch[state.order[-1]][j],
         walls=np.vstack([state.walls, walls]),
         vertices=np.vstack([state.vertices, pts]),
     )
@@ -382,7 +381,7 @@ def _close(search: _Search, state: _State) -> None:
     w_l, w_c, w_b = search.weights()
     corners = state.corners + (turn not in (0, 2))
     closure = float(np.abs(state.end).sum())
-    closing = search.mismatch.get((state.order[-1], 0, turn), 1.0)
+    closing = search.mismatch[state.order[-1]][0]
     boundary = state.boundary + closing
     missing = len(search.pieces) - len(state.order)
     if missing:
@@ -449,7 +448,7 @@ def _dfs(search: _Search, state: _State, remaining: tuple[int, ...]) -> None:
     # Cheapest way into each piece left (and into the loop's start) from a piece that can
     # still precede it: a lower bound for every child at once.
     sources = (state.order[-1], *remaining)
-    entry = {b: min(search.cheapest_pair[a][b] for a in sources if a != b) for b in (*remaining, 0)}
+    entry = {b: min(search.mismatch[a][b] for a in sources if a != b) for b in (*remaining, 0)}
     entry_total = sum(entry.values())
     options = _options(search, state, remaining)
     if not options:
@@ -465,7 +464,7 @@ def _dfs(search: _Search, state: _State, remaining: tuple[int, ...]) -> None:
     ranked = []
     for (j, turn), closure in zip(options, closures.tolist(), strict=True):
         owed = abs(4 - turning - turn) if search.require_closed else 0
-        joined = state.boundary + search.mismatch[(state.order[-1], j, turn)]
+        joined = state.boundary + search.mismatch[state.order[-1]][j]
         bound = (
             w_l * (corners + (turn != 0) + owed + 4)
             + w_c * closure
@@ -503,15 +502,18 @@ def _options(search: _Search, state: _State, remaining: tuple[int, ...]) -> list
     return options
 
 
-def _all_mismatches(
-    pieces: Sequence[Piece], params: PlacementParams
-) -> dict[tuple[int, int, int], float]:
-    """Boundary mismatch of every ordered pair, keyed by junction turn as well (the score
-    does not depend on the turn; the search looks it up per junction)."""
+def _all_mismatches(pieces: Sequence[Piece], params: PlacementParams) -> list[list[float]]:
+    """Boundary mismatch of every ordered pair: [a][b] for b following a. The score does
+    not depend on the junction's turn. A piece never follows itself (1.0, the worst score)
+    unless it is the only one, closing its own loop."""
     n = len(pieces)
-    pairs = [(a, b) for a in range(n) for b in range(n) if a != b or n == 1]
-    scores = {pair: _boundary_mismatch(pieces[pair[0]], pieces[pair[1]], params) for pair in pairs}
-    return {(a, b, t): scores[(a, b)] for a, b in pairs for t in _TURNS}
+    return [
+        [
+            _boundary_mismatch(pieces[a], pieces[b], params) if a != b or n == 1 else 1.0
+            for b in range(n)
+        ]
+        for a in range(n)
+    ]
 
 
 def _root(first: Piece, params: PlacementParams) -> _State:
@@ -527,14 +529,6 @@ def _root(first: Piece, params: PlacementParams) -> _State:
         walls=_trim_start(_walls(first.keypoints), first.keypoints[0], params.closure_overshoot),
         vertices=first.keypoints.copy(),
     )
-
-
-def _cheapest_pairs(mismatch: Mapping[tuple[int, int, int], float], n: int) -> list[list[float]]:
-    """Lowest boundary mismatch of b following a, over the junction turns: [a][b]."""
-    best = [[1.0] * n for _ in range(n)]
-    for (a, b, _), value in mismatch.items():
-        best[a][b] = min(best[a][b], value)
-    return best
 
 
 def _constraint_maps(
@@ -579,7 +573,6 @@ def place_pieces(
     deadline = time.monotonic() + params.max_search_seconds  # shared by both searches
     for require_closed in (True, False):
         search = _Search(list(pieces), params, mismatch, successor, predecessor, require_closed)
-        search.cheapest_pair = _cheapest_pairs(mismatch, n)
         search.deadline = deadline
         # Iterative broadening: cheap passes that follow only the most promising children
         # spread good incumbents over the whole tree, so the full pass prunes early.
