@@ -33,6 +33,7 @@ _MAX_GAP_CELLS = 2  # low cells bridged inside one candidate segment
 _OCCLUSION_REACH = 3.0  # m, longest occluded stretch bridged between parallel walls
 _SUPPORT_POINTS = 3  # interior-strip points that show the line's cell borders scanned space
 _TOP_REACH = 0.85  # share of the floor-to-ceiling band a wall column must reach
+_AXIS_COS = float(np.cos(np.radians(25.0)))  # a normal within 25 deg of an axis faces along it
 
 
 @dataclass(frozen=True)
@@ -336,7 +337,7 @@ def find_wall_lines(
     # Scanned space is told by points on horizontal surfaces (floor, ceiling, table tops):
     # stray points (outliers, reflections) have no consistent normal, and a wall's far
     # face standing behind it is not space the scanner saw.
-    horizontal = np.abs(normals[:, 2]) > np.cos(np.radians(25.0))
+    horizontal = np.abs(normals[:, 2]) > _AXIS_COS
     grid = _make_grid(aligned[:, :2], params.cell_size, horizontal)
     columns = ((aligned[in_band, :2] - grid.origin) / params.cell_size).astype(np.int64)
     z_bins = ((aligned[in_band, 2] - floor_z) / params.cell_size).astype(np.int64)
@@ -349,7 +350,7 @@ def find_wall_lines(
     lines: list[WallLine] = []
     for axis in (0, 1):
         offset_axis = 1 - axis
-        facing = in_band & (np.abs(normals[:, offset_axis]) > np.cos(np.radians(25.0)))
+        facing = in_band & (np.abs(normals[:, offset_axis]) > _AXIS_COS)
         wall_points = aligned[facing]
         min_support = params.min_wall_cells * rule.n * 0.5
         for peak in _offset_peaks(wall_points[:, offset_axis], min_support):
