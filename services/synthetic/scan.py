@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from services.synthetic_furniture import Box, Furnishing
-from services.synthetic_room import Room, nearest_boundary, point_at_arc, points_in_polygon
+from services.synthetic.furniture import Box, Furnishing
+from services.synthetic.room import Room, nearest_boundary, point_at_arc, points_in_polygon
 from services.types import FloatArray
 
 __all__ = ["ScanStyle", "Stretch", "sample_scan", "stretch_keypoints"]

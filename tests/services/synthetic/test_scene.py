@@ -11,19 +11,12 @@ import pytest
 
 from services.synthetic import (
     SceneSpec,
-    SyntheticFragment,
     SyntheticScene,
     generate_scene,
     ground_truth_json,
 )
-from services.synthetic_room import (
-    Room,
-    nearest_boundary,
-    points_in_polygon,
-    random_rectilinear_polygon,
-    signed_area,
-)
-from services.types import FloatArray
+from services.synthetic.room import Room, nearest_boundary, points_in_polygon
+from tests.services.synthetic.checks import assert_valid_polygon, world_points
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -40,31 +33,6 @@ def scenes() -> list[SyntheticScene]:
     return [generate_scene(SMALL, seed) for seed in SEEDS]
 
 
-def world_points(fragment: SyntheticFragment) -> FloatArray:
-    return fragment.points @ fragment.pose[:3, :3].T + fragment.pose[:3, 3]
-
-
-def assert_valid_polygon(polygon: np.ndarray, n_range: tuple[int, int], min_edge: float) -> None:
-    n = len(polygon)
-    assert n_range[0] <= n <= n_range[1] and n % 2 == 0
-    assert signed_area(polygon) > 0.0, "not counter-clockwise"
-    delta = np.roll(polygon, -1, axis=0) - polygon
-    assert np.all((delta[:, 0] == 0) ^ (delta[:, 1] == 0)), "not rectilinear"
-    assert np.all(np.abs(delta).sum(axis=1) >= min_edge - 0.011), "edge too short"
-    turns = (
-        delta[:, 0] * np.roll(delta, -1, axis=0)[:, 1] - delta[:, 1] * np.roll(delta, -1, 0)[:, 0]
-    )
-    assert np.all(turns != 0), "collinear vertex"
-    lo = np.minimum(polygon, np.roll(polygon, -1, axis=0))
-    hi = np.maximum(polygon, np.roll(polygon, -1, axis=0))
-    for i in range(n):
-        for j in range(i + 2, n):
-            if i == 0 and j == n - 1:
-                continue  # neighbours share a vertex
-            touching = np.all(lo[i] <= hi[j]) and np.all(lo[j] <= hi[i])
-            assert not touching, f"edges {i} and {j} touch"
-
-
 def test_same_seed_same_scene():
     a, b = generate_scene(SMALL, 7), generate_scene(SMALL, 7)
     assert np.array_equal(a.polygon, b.polygon)
@@ -75,26 +43,6 @@ def test_same_seed_same_scene():
         assert np.array_equal(fa.keypoints_local, fb.keypoints_local)
     c = generate_scene(SMALL, 8)
     assert not np.array_equal(a.fragments[0].points[:10], c.fragments[0].points[:10])
-
-
-@pytest.mark.parametrize("seed", range(200))
-def test_random_polygons_are_valid(seed):
-    rng = np.random.default_rng(seed)
-    size = (float(rng.uniform(2.0, 18.0)), float(rng.uniform(6.0, 20.0)))
-    target = int(rng.choice(np.arange(4, 17, 2)))
-    polygon = random_rectilinear_polygon(rng, size, target, 0.8)
-    assert_valid_polygon(polygon, (4, target), 0.8)
-    assert np.allclose(polygon.min(axis=0), 0.0)
-    assert np.allclose(polygon.max(axis=0), size)
-
-
-def test_corner_targets_are_mostly_reached():
-    reached = 0
-    for seed in range(100):
-        rng = np.random.default_rng(seed)
-        target = int(rng.choice(np.arange(4, 17, 2)))
-        reached += len(random_rectilinear_polygon(rng, (12.0, 16.0), target, 0.8)) == target
-    assert reached >= 90
 
 
 def test_scene_rooms_are_valid(scenes):

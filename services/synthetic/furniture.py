@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from services.geometry import points_in_polygon, signed_area
-from services.synthetic_room import Room
+from services.synthetic.room import Room
 from services.types import FloatArray
 
 __all__ = ["Box", "Furnishing", "Opening", "WallCover", "furnish_room"]

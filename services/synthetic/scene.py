@@ -3,7 +3,7 @@
 World frame: right-handed, z up, floor at z = 0, meters; the room polygon is counter-clockwise
 seen from above. The room loop is cut into contiguous stretches (neighbours overlap or leave
 a gap of a few decimeters); each fragment sees only its stretch of wall plus the floor,
-ceiling and furniture in front of it (see :mod:`services.synthetic_scan`), with noise,
+ceiling and furniture in front of it (see :mod:`services.synthetic.scan`), with noise,
 outliers and uneven density, in its own tilted, rotated and shifted local frame.
 
 Pure: returns arrays, writes no files (the CLI writes PLYs).
@@ -18,9 +18,9 @@ from typing import Any
 import numpy as np
 
 from services.geometry import signed_area
-from services.synthetic_furniture import Furnishing, furnish_room
-from services.synthetic_room import Room, random_rectilinear_polygon
-from services.synthetic_scan import ScanStyle, Stretch, sample_scan, stretch_keypoints
+from services.synthetic.furniture import Furnishing, furnish_room
+from services.synthetic.room import Room, random_rectilinear_polygon
+from services.synthetic.scan import ScanStyle, Stretch, sample_scan, stretch_keypoints
 from services.types import FloatArray
 
 __all__ = [
@@ -47,7 +47,7 @@ class SceneSpec:
     spans at least one corner). corner_cut_share: share of cuts moved onto a room corner,
     which then lies in the unseen gap between the two neighbours (their junction turns).
     density_falloff, scanner_spacing, patch_gain_range, oversample: see
-    :class:`services.synthetic_scan.ScanStyle`.
+    :class:`services.synthetic.scan.ScanStyle`.
     """
 
     n_corners_range: tuple[int, int] = (4, 16)
