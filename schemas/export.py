@@ -14,6 +14,7 @@ from typing import Any
 
 from pydantic import BaseModel, TypeAdapter
 
+from schemas.hints import HintsModel
 from schemas.jobs import DeadLetter, Job
 from schemas.layout import LocalLayoutWire
 from schemas.params import PipelineParams
@@ -34,6 +35,7 @@ SCHEMA_DIR = Path(__file__).parent / "json"
 
 _MODELS: dict[str, type[BaseModel]] = {
     "result": ResultModel,
+    "hints": HintsModel,
     "error": ErrorBody,
     "upload_reply": UploadReply,
     "pending_reply": PendingReply,

@@ -1,4 +1,8 @@
-"""The result JSON of the external contract (section 3), schema version 1."""
+"""The result JSON of the external contract (section 3), schema version 2.
+
+Version 2 adds the status "ambiguous", a calibrated ``confidence`` and ``alternatives``
+(the runners-up, each with full poses, floorplan and probability).
+"""
 
 from __future__ import annotations
 
@@ -7,16 +11,21 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 __all__ = [
+    "AlternativeFragmentModel",
+    "AlternativeModel",
     "FloorplanModel",
     "FragmentResultModel",
     "LocalLayoutModel",
     "ResultModel",
     "RoomModel",
+    "Status",
 ]
 
-SCHEMA_VERSION: Literal[1] = 1
+SCHEMA_VERSION: Literal[2] = 2
 
-Status = Literal["closed", "open", "failed"]
+Status = Literal["closed", "ambiguous", "open", "failed"]
+
+Pose = list[list[float]]
 
 
 class _Open(BaseModel):
@@ -34,7 +43,7 @@ class LocalLayoutModel(_Open):
 class FragmentResultModel(_Open):
     id: str
     placed: bool
-    pose: list[list[float]] | None = Field(
+    pose: Pose | None = Field(
         None, description="4x4 row-major, maps fragment-local points to the site frame"
     )
     loop_index: int | None = Field(None, description="position in the counter-clockwise loop")
@@ -52,9 +61,29 @@ class FloorplanModel(_Open):
     rooms: list[RoomModel] = Field(default_factory=list)
 
 
+class AlternativeFragmentModel(_Open):
+    id: str
+    pose: Pose = Field(description="4x4 row-major, fragment-local -> site frame")
+    loop_index: int | None = None
+
+
+class AlternativeModel(_Open):
+    """A runner-up assembly: another room the fragments close into."""
+
+    probability: float = Field(ge=0.0, le=1.0, description="probability that this one is right")
+    fragments: list[AlternativeFragmentModel] = Field(default_factory=list)
+    floorplan: FloorplanModel = Field(default_factory=FloorplanModel)
+
+
 class ResultModel(_Open):
-    schema_version: Literal[1] = SCHEMA_VERSION
+    schema_version: Literal[2] = SCHEMA_VERSION
     status: Status
+    confidence: float = Field(
+        0.0, ge=0.0, le=1.0, description="calibrated probability that the main assembly is right"
+    )
     fragments: list[FragmentResultModel] = Field(default_factory=list)
     floorplan: FloorplanModel = Field(default_factory=FloorplanModel)
+    alternatives: list[AlternativeModel] = Field(
+        default_factory=list, description="runners-up, most probable first"
+    )
     diagnostics: dict[str, Any] = Field(default_factory=dict)

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from schemas.hints import HintsModel
 from schemas.params import PipelineParams
 from schemas.result import (
     FloorplanModel,
@@ -94,8 +95,7 @@ def place_site(
     layouts: Mapping[str, LocalLayout],
     params: PipelineParams = PipelineParams(),
     progress: ProgressFn | None = None,
-    order_hint: Sequence[str] | None = None,
-    neighbours: Sequence[tuple[str, str]] = (),
+    hints: HintsModel | None = None,
 ) -> ResultModel:
     """Place every fragment of a site and build the contract's result.
 
@@ -104,7 +104,7 @@ def place_site(
     layouts : local layout per fragment id; fragments keep this order in the result.
     params : algorithm parameters (placement section used here).
     progress : optional callback ``(stage, fraction)``.
-    order_hint, neighbours : optional user constraints on the loop order.
+    hints : optional fleet knowledge: prior poses, known neighbours, known order.
     """
     report = progress or (lambda stage, fraction: None)
     fragments = {
@@ -118,6 +118,8 @@ def place_site(
     usable = [fid for fid, lay in layouts.items() if lay.ok]
     report("placement", 0.1)
     pieces = {fid: make_piece(fid, layouts[fid]) for fid in usable}
+    order_hint = hints.order if hints else None
+    neighbours = hints.neighbours if hints else ()
     placement = place_pieces(list(pieces.values()), params.placement, order_hint, neighbours)
     if placement is None:
         report("done", 1.0)

@@ -1,0 +1,20 @@
+"""The one pattern of site, fragment and robot ids (contract section 4)."""
+
+from __future__ import annotations
+
+import re
+
+__all__ = ["ID_PATTERN", "ID_REGEX", "is_valid_id"]
+
+# 1 to 64 characters of [A-Za-z0-9._-], but not "." or ".." (they name no file or key).
+ID_PATTERN = r"^(?!\.{1,2}$)[A-Za-z0-9._-]{1,64}$"
+ID_REGEX = re.compile(ID_PATTERN)
+
+
+def is_valid_id(value: str) -> bool:
+    """True for a usable id.
+
+    >>> [is_valid_id(v) for v in ("frag_00", "a.b-c", "..", ".", "", "a/b")]
+    [True, True, False, False, False, False]
+    """
+    return ID_REGEX.match(value) is not None
