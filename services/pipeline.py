@@ -175,6 +175,7 @@ def align_clouds(
     params: PipelineParams = PipelineParams(),
     progress: ProgressFn | None = None,
     premerge_overlapping: bool = False,
+    hints: HintsModel | None = None,
 ) -> ResultModel:
     """The whole pipeline on in-memory fragments (the CLI's ``align``).
 
@@ -188,6 +189,7 @@ def align_clouds(
     params : algorithm parameters.
     progress : optional callback ``(stage, fraction)``.
     premerge_overlapping : run the FPFH pre-merge first.
+    hints : optional fleet knowledge (see :func:`place_site`).
     """
     report = progress or (lambda stage, fraction: None)
     groups: dict[str, dict[str, FloatArray]] = {fid: {fid: np.eye(4)} for fid in clouds}
@@ -202,7 +204,7 @@ def align_clouds(
         report(f"local layout {gid}", index / max(len(merged), 1))
         layouts[gid] = estimate_layout(points, params)
     report("placement", 0.9)
-    placed = place_site(layouts, params)
+    placed = place_site(layouts, params, hints=hints)
     return _expand_groups(placed, groups, list(clouds))
 
 
