@@ -17,6 +17,8 @@ from services.types import FloatArray
 
 __all__ = [
     "Room",
+    "grid_lines",
+    "grid_outline",
     "nearest_boundary",
     "point_at_arc",
     "points_in_polygon",
@@ -128,15 +130,20 @@ def random_rectilinear_polygon(
     return np.roll(best, -int(rng.integers(len(best))), axis=0)
 
 
-def _cuts(rng: np.random.Generator, length: float, min_edge: float) -> FloatArray:
-    """Grid line positions 0 = c_0 < ... < c_n = length, spacing >= min_edge (cm-rounded)."""
-    cap = int(np.clip(np.floor(length / (min_edge + 0.02)), 1, 6))
-    n = int(rng.integers(min(2, cap), cap + 1))
+def grid_lines(rng: np.random.Generator, length: float, n: int, min_edge: float) -> FloatArray:
+    """(n + 1,) grid line positions 0 = c_0 < ... < c_n = length, cm-rounded, cells at least
+    ``min_edge`` wide (random widths; needs ``length >= n * (min_edge + 0.02)``)."""
     spare = length - n * (min_edge + 0.02)
     widths = (min_edge + 0.02) + spare * rng.dirichlet(np.full(n, 2.0))
     cuts = np.round(np.concatenate([[0.0], np.cumsum(widths)]), 2)
     cuts[-1] = length
     return cuts
+
+
+def _cuts(rng: np.random.Generator, length: float, min_edge: float) -> FloatArray:
+    """Grid lines of 1 to 6 random cells (at least 2 when they fit), see :func:`grid_lines`."""
+    cap = int(np.clip(np.floor(length / (min_edge + 0.02)), 1, 6))
+    return grid_lines(rng, length, int(rng.integers(min(2, cap), cap + 1)), min_edge)
 
 
 def _carve(rng: np.random.Generator, nx: int, ny: int, target: int) -> list[_Vertex]:
@@ -146,7 +153,7 @@ def _carve(rng: np.random.Generator, nx: int, ny: int, target: int) -> list[_Ver
     still the full grid. Returns the outline's corner vertices (grid indices), CCW.
     """
     occupied = np.ones((nx, ny), dtype=bool)
-    loop = _outline(occupied)
+    loop = grid_outline(occupied)
     assert loop is not None
     while len(loop) < target:
         cells = [tuple(c) for c in np.argwhere(occupied)]
@@ -155,7 +162,7 @@ def _carve(rng: np.random.Generator, nx: int, ny: int, target: int) -> list[_Ver
         for k in order:
             i, j = cells[k]
             occupied[i, j] = False
-            candidate = _outline(occupied) if _keeps_bbox(occupied) else None
+            candidate = grid_outline(occupied) if _keeps_bbox(occupied) else None
             if candidate is not None and len(candidate) <= target:
                 accepted = candidate
                 break
@@ -172,8 +179,12 @@ def _keeps_bbox(occupied: NDArray[np.bool_]) -> bool:
     return all(bool(edge.any()) for edge in edges)
 
 
-def _outline(occupied: NDArray[np.bool_]) -> list[_Vertex] | None:
-    """CCW corner vertices of the occupied cells, or None unless they form one simple loop."""
+def grid_outline(occupied: NDArray[np.bool_]) -> list[_Vertex] | None:
+    """CCW corner vertices of the occupied cells, or None unless they form one simple loop.
+
+    occupied: (nx, ny) bool, cell (i, j) spans grid lines i..i+1 along x and j..j+1 along y.
+    Returns the loop's turning vertices as grid indices (i, j), counter-clockwise.
+    """
     nx, ny = occupied.shape
     padded = np.pad(occupied, 1)
     following: dict[_Vertex, _Vertex] = {}
