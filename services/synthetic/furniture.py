@@ -12,10 +12,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from services.geometry import points_in_polygon, signed_area
-from services.synthetic.room import Room
+from services.synthetic.room import Room, point_at_arc
 from services.types import FloatArray
 
-__all__ = ["Box", "Furnishing", "Opening", "WallCover", "furnish_room"]
+__all__ = ["Box", "Furnishing", "Opening", "WallCover", "furnish_room", "transient_boxes"]
 
 
 @dataclass(frozen=True)
@@ -106,6 +106,32 @@ def furnish_room(
         _free_furniture(rng, room, clutter, boxes)
     thickness = float(rng.uniform(0.1, 0.25))
     return Furnishing(tuple(boxes), tuple(covers), tuple(found), thickness)
+
+
+def transient_boxes(
+    rng: np.random.Generator,
+    room: Room,
+    boxes: tuple[Box, ...],
+    start: float,
+    length: float,
+    level: float,
+    reach: float,
+) -> tuple[Box, ...]:
+    """Objects present during one scan only (people, carts, boxes), in front of its stretch.
+
+    About ``level`` per 4 m of the stretch (arc ``start``, ``length`` m along the loop): boxes
+    0.3-0.8 m wide, 0.3-1.8 m tall, 0.3 m to min(reach, 3 m) from the wall, in the room and
+    clear of ``boxes``. World frame.
+    """
+    found: list[Box] = []
+    for _ in range(int(rng.poisson(level * length / 4.0))):
+        foot, edge = point_at_arc(room, np.array([start + rng.uniform(0.0, length)]))
+        centre = foot[0] + rng.uniform(0.3, max(0.3, min(reach, 3.0))) * room.normals[edge[0]]
+        half = 0.5 * rng.uniform(0.3, 0.8, 2)
+        lo, hi, height = centre - half, centre + half, float(rng.uniform(0.3, 1.8))
+        if _footprint_free(room, lo, hi, [*boxes, *found], wall_clear=0.05, margin=0.05):
+            found.append(Box(np.append(lo, 0.0), np.append(hi, height)))
+    return tuple(found)
 
 
 def _openings(
@@ -209,7 +235,7 @@ def _footprint_free(
     room: Room,
     lo: FloatArray,
     hi: FloatArray,
-    boxes: list[Box],
+    boxes: list[Box] | tuple[Box, ...],
     *,
     wall_clear: float,
     margin: float,

@@ -1,9 +1,10 @@
 """Surface sampling for one synthetic fragment: what a scan of one stretch of wall sees.
 
 A fragment sees the walls of its stretch of the room loop (full height, minus openings and
-the wall hidden behind furniture), the reveals of its openings, the floor beyond its doors,
-and the floor, ceiling and furniture in front of its walls: points whose nearest wall point
-lies on the stretch, within a reach. All points are world frame, noise-free.
+the wall hidden behind furniture), the reveals of the parts of openings on it, the floor
+beyond its doors, and the floor, ceiling and furniture in front of its walls: points whose
+nearest wall point lies on the stretch (grown by ``ScanStyle.beyond``), within a reach. All
+points are world frame, noise-free.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from services.synthetic.furniture import Box, Furnishing
+from services.synthetic.furniture import Box, Furnishing, Opening
 from services.synthetic.room import Room, nearest_boundary, point_at_arc, points_in_polygon
 from services.types import FloatArray
 
@@ -45,6 +46,8 @@ class ScanStyle:
     patch_gain: density factor inside one random sphere of 0.5-1.5 m radius (1 for none).
     see_through: also sample the floor beyond the doors.
     oversample: candidates drawn per kept point before density thinning.
+    beyond: floor, ceiling and furniture are seen in front of the stretch grown by this much
+    along the loop at both ends, m (walls only on the stretch itself).
     """
 
     reach: float
@@ -54,6 +57,7 @@ class ScanStyle:
     patch_gain: float
     see_through: bool
     oversample: float
+    beyond: float = 0.0
 
 
 def stretch_keypoints(room: Room, stretch: Stretch) -> FloatArray:
@@ -101,14 +105,15 @@ def _candidates(
 ) -> FloatArray:
     parts = _walls(rng, room, furnishing, stretch, density)
     parts += _reveals(rng, room, furnishing, stretch, style, density)
-    keypoints = stretch_keypoints(room, stretch)
+    region = _grown(room, stretch, style.beyond)
+    keypoints = stretch_keypoints(room, region)
     for z, reach in ((0.0, style.reach), (room.height, style.ceiling_reach)):
         if reach <= 0.0:
             continue
         lo = np.maximum(keypoints.min(axis=0) - reach, room.polygon.min(axis=0))
         hi = np.minimum(keypoints.max(axis=0) + reach, room.polygon.max(axis=0))
         flat = _rect(rng, np.append(lo, z), [hi[0] - lo[0], 0, 0], [0, hi[1] - lo[1], 0], density)
-        flat = flat[_in_front(flat[:, :2], room, stretch, keypoints, reach)]
+        flat = flat[_in_front(flat[:, :2], room, region, keypoints, reach)]
         keep = points_in_polygon(flat[:, :2], room.polygon)
         if z == 0.0:
             keep &= ~_under_boxes(flat[:, :2], furnishing.boxes)
@@ -117,8 +122,16 @@ def _candidates(
     for box in furnishing.boxes:
         if np.all(box.hi[:2] >= lo) and np.all(box.lo[:2] <= hi):
             faces = _box_faces(rng, box, density)
-            parts.append(faces[_in_front(faces[:, :2], room, stretch, keypoints, style.reach)])
+            parts.append(faces[_in_front(faces[:, :2], room, region, keypoints, style.reach)])
     return np.vstack(parts)
+
+
+def _grown(room: Room, stretch: Stretch, beyond: float) -> Stretch:
+    """The stretch grown by ``beyond`` at both ends (at most the whole loop)."""
+    if beyond <= 0.0:
+        return stretch
+    length = min(stretch.length + 2.0 * beyond, room.perimeter)
+    return Stretch(float(np.mod(stretch.start - beyond, room.perimeter)), length)
 
 
 def _walls(
@@ -157,27 +170,49 @@ def _reveals(
     style: ScanStyle,
     density: float,
 ) -> list[FloatArray]:
-    """Jambs, lintels and sills of visible openings, and the floor seen through doors."""
+    """Jambs, lintels and sills of the parts of openings on the stretch, and the floor seen
+    through doors. A jamb is seen when its side of the opening is on the stretch."""
     parts: list[FloatArray] = []
     depth = furnishing.wall_thickness
     for o in furnishing.openings:
-        middle = room.arcs[o.edge] + 0.5 * (o.t0 + o.t1)
-        if not _on_stretch(np.array([middle]), room, stretch)[0]:
+        pieces = [
+            (max(o.t0, lo), min(o.t1, hi))
+            for lo, hi in _visible_intervals(room, o.edge, stretch)
+            if min(o.t1, hi) > max(o.t0, lo)
+        ]
+        if not pieces:
             continue
         d, out = np.append(room.dirs[o.edge], 0.0), np.append(-room.normals[o.edge], 0.0)
-        corner = np.append(room.polygon[o.edge], 0.0) + o.t0 * d
-        width, height = (o.t1 - o.t0) * d, np.array([0.0, 0.0, o.z1 - o.z0])
-        low = corner + np.array([0.0, 0.0, o.z0])
-        parts += [
-            _rect(rng, low, depth * out, height, density),
-            _rect(rng, low + width, depth * out, height, density),
-            _rect(rng, low + height, width, depth * out, density),
-        ]
-        if o.z0 > 0.0:
-            parts.append(_rect(rng, low, width, depth * out, density))
-        elif style.see_through:
-            beyond = float(rng.uniform(0.5, 2.0))
-            parts.append(_rect(rng, corner + depth * out, width, beyond * out, density))
+        height = np.array([0.0, 0.0, o.z1 - o.z0])
+        low = np.append(room.polygon[o.edge], 0.0) + o.t0 * d + np.array([0.0, 0.0, o.z0])
+        if any(a == o.t0 for a, _ in pieces):
+            parts.append(_rect(rng, low, depth * out, height, density))
+        if any(b == o.t1 for _, b in pieces):
+            parts.append(_rect(rng, low + (o.t1 - o.t0) * d, depth * out, height, density))
+        for a, b in pieces:
+            parts += _across(rng, room, o, (a, b), depth, style, density)
+    return parts
+
+
+def _across(
+    rng: np.random.Generator,
+    room: Room,
+    o: Opening,
+    piece: tuple[float, float],
+    depth: float,
+    style: ScanStyle,
+    density: float,
+) -> list[FloatArray]:
+    """Lintel and sill (or the floor beyond a door) of one piece [a, b] of an opening."""
+    d, out = np.append(room.dirs[o.edge], 0.0), np.append(-room.normals[o.edge], 0.0)
+    corner = np.append(room.polygon[o.edge], 0.0) + piece[0] * d
+    width, low = (piece[1] - piece[0]) * d, corner + np.array([0.0, 0.0, o.z0])
+    parts = [_rect(rng, low + np.array([0.0, 0.0, o.z1 - o.z0]), width, depth * out, density)]
+    if o.z0 > 0.0:
+        parts.append(_rect(rng, low, width, depth * out, density))
+    elif style.see_through:
+        beyond = float(rng.uniform(0.5, 2.0))
+        parts.append(_rect(rng, corner + depth * out, width, beyond * out, density))
     return parts
 
 
