@@ -1,8 +1,9 @@
 """Synthetic scenes with ground truth: one rectilinear room scanned in partial fragments.
 
 World frame: right-handed, z up, floor at z = 0, meters; the room polygon is counter-clockwise
-seen from above. The room loop is cut into contiguous stretches (neighbours overlap or leave
-a gap of a few decimeters); each fragment sees only its stretch of wall plus the floor,
+seen from above. The room (random, of a shape family, or a given outline) loop is
+cut into contiguous stretches (neighbours overlap or leave a gap of a few decimeters; see
+:mod:`services.synthetic.cuts`); each fragment sees its stretch of wall plus the floor,
 ceiling and furniture in front of it (see :mod:`services.synthetic.scan`), with noise,
 outliers and uneven density, in its own tilted, rotated and shifted local frame.
 
@@ -11,19 +12,31 @@ Pure: returns arrays, writes no files (the CLI writes PLYs).
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from dataclasses import asdict, dataclass
-from typing import Any
+from dataclasses import asdict, dataclass, field
+from typing import Any, Literal
 
 import numpy as np
 
 from services.geometry import signed_area
-from services.synthetic.furniture import Furnishing, furnish_room
-from services.synthetic.room import Room, random_rectilinear_polygon
+from services.synthetic.cuts import (
+    Cut,
+    arc_cuts,
+    cut_turns,
+    edge_cuts,
+    furniture_clearance,
+    stretches,
+)
+from services.synthetic.families import pick_family, random_room
+from services.synthetic.furniture import Furnishing, furnish_room, transient_boxes
+from services.synthetic.room import Room
 from services.synthetic.scan import ScanStyle, Stretch, sample_scan, stretch_keypoints
+from services.synthetic.shapes import is_simple_rectilinear
 from services.types import FloatArray
 
 __all__ = [
+    "Junction",
     "SceneSpec",
     "SyntheticFragment",
     "SyntheticScene",
@@ -32,8 +45,6 @@ __all__ = [
 ]
 
 _Range = tuple[float, float]
-_MIN_STRAIGHT = 2.5  # shortest stretch that sees a single straight wall
-_CORNER_GAP = (0.1, 0.4)  # m, unseen wall around a corner where a cut falls on it
 
 
 @dataclass(frozen=True)
@@ -48,6 +59,18 @@ class SceneSpec:
     which then lies in the unseen gap between the two neighbours (their junction turns).
     density_falloff, scanner_spacing, patch_gain_range, oversample: see
     :class:`services.synthetic.scan.ScanStyle`.
+
+    cut_model: "edges" (at most one cut per edge, two on a long edge) or "arc" (cuts anywhere
+    on the loop, several per edge, single-wall fragments whatever ``straight_fragments``; see
+    :mod:`services.synthetic.cuts`). min_stretch: "arc" only, least visible wall per
+    fragment, m. With "arc" and ``end_margin == 0`` doors, windows and furniture may cross
+    cuts. shape_family: "carved" (random grid carving) or "mixed" (one family per scene among
+    carved, long thin, L, T, U, comb and notched; :mod:`services.synthetic.families`).
+    reach_beyond: per-fragment extra floor, ceiling and furniture seen past both ends of
+    the stretch along the loop, m (neighbours then share floor and furniture even across a
+    gap). transient_clutter: per-fragment objects seen by that scan only (people, carts,
+    boxes), per 4 m of stretch. max_scene_points: when > 0, point counts are scaled down so
+    that n fragments times the largest count stays within it.
     """
 
     n_corners_range: tuple[int, int] = (4, 16)
@@ -74,6 +97,12 @@ class SceneSpec:
     scanner_spacing: float = 6.0
     patch_gain_range: _Range = (1.0, 3.0)
     oversample: float = 2.5
+    cut_model: Literal["edges", "arc"] = "edges"
+    min_stretch: float = 1.0
+    shape_family: Literal["carved", "mixed"] = "carved"
+    reach_beyond: _Range = (0.0, 0.0)
+    transient_clutter: _Range = (0.0, 0.0)
+    max_scene_points: int = 0
 
     def __post_init__(self) -> None:
         ranges: tuple[tuple[float, float], ...] = (
@@ -88,6 +117,17 @@ class SceneSpec:
             raise ValueError("every range must be (low, high) with low <= high")
         if self.n_corners_range[1] < 4 or self.n_fragments_range[0] < 1:
             raise ValueError("rooms need >= 4 corners and scenes >= 1 fragment")
+        self._check_options()
+
+    def _check_options(self) -> None:
+        """Checks of the cut, shape and scanner options."""
+        if self.cut_model not in ("edges", "arc") or self.shape_family not in ("carved", "mixed"):
+            raise ValueError("cut_model is 'edges' or 'arc'; shape_family 'carved' or 'mixed'")
+        ranges = (self.reach_beyond, self.transient_clutter)
+        if any(lo > hi or lo < 0.0 for lo, hi in ranges) or self.max_scene_points < 0:
+            raise ValueError("reach_beyond and transient_clutter are (low, high) >= 0")
+        if self.min_stretch <= 0.0 or -self.gap_range[0] >= self.min_stretch:
+            raise ValueError("min_stretch must be > 0 and longer than the largest overlap")
 
     @classmethod
     def easy(cls) -> SceneSpec:
@@ -140,6 +180,41 @@ class SceneSpec:
             oversample=2.0,
         )
 
+    @classmethod
+    def world(cls) -> SceneSpec:
+        """As hard as scenes made outside the project: cuts anywhere (straight junctions,
+        single-wall fragments, a few on corners), overlaps up to 0.5 m and gaps up to 0.3 m,
+        openings and furniture across cuts, real-looking room shapes, 2 to 16 fragments
+        (benchmarks set ``n_fragments_range`` per bucket) from scanners that differ in noise,
+        density, reach and clutter. Point counts shrink for many fragments (at most 1.2 M
+        points per scene)."""
+        return cls(
+            size_range=((2.0, 5.0), (18.0, 20.0)),
+            n_fragments_range=(2, 16),
+            noise_range=(0.005, 0.03),
+            outlier_fraction=0.02,
+            max_tilt_deg=4.0,
+            points_per_fragment=(30_000, 120_000),
+            clutter=1.5,
+            see_through=True,
+            ceiling_fraction=(0.0, 1.0),
+            floor_reach_range=(1.5, 5.0),
+            gap_range=(-0.5, 0.3),
+            min_edge=0.5,
+            end_margin=0.0,
+            straight_fragments=True,
+            corner_cut_share=0.15,
+            density_falloff=1.5,
+            scanner_spacing=8.0,
+            patch_gain_range=(1.0, 5.0),
+            cut_model="arc",
+            min_stretch=1.0,
+            shape_family="mixed",
+            reach_beyond=(0.5, 1.0),
+            transient_clutter=(0.0, 1.0),
+            max_scene_points=1_200_000,
+        )
+
 
 @dataclass(frozen=True)
 class SyntheticFragment:
@@ -168,6 +243,27 @@ class SyntheticFragment:
     loop_index: int
     centroid_local: FloatArray
 
+    @property
+    def single_wall(self) -> bool:
+        """True when the stretch holds no room corner (the scan sees one straight wall)."""
+        return len(self.keypoints_world) == 2
+
+
+@dataclass(frozen=True)
+class Junction:
+    """Where a fragment's stretch meets the next one along the CCW loop.
+
+    gap: unseen wall between the two stretch ends along the loop, m; negative when they
+    overlap (both see that much wall). turn: signed quarter turns of the room corners inside
+    the junction (unseen, or seen by both): 0 for a straight junction, +1 for a convex
+    corner, -1 for a reflex one.
+    """
+
+    from_id: str
+    to_id: str
+    gap: float
+    turn: int
+
 
 @dataclass(frozen=True)
 class SyntheticScene:
@@ -176,6 +272,9 @@ class SyntheticScene:
     polygon: (V, 2) float64 world, counter-clockwise, first vertex not repeated.
     fragments: sorted by id; ids do not follow the loop order.
     diagonal: room bounding-box diagonal, m.
+    junctions: one per fragment in loop order (loop_index 0, 1, ...), to the next fragment.
+    furnishing: the room's doors, windows and furniture, world frame (not the objects seen
+    by one scan only).
     """
 
     seed: int
@@ -185,6 +284,8 @@ class SyntheticScene:
     fragments: tuple[SyntheticFragment, ...]
     diagonal: float
     spec: SceneSpec
+    junctions: tuple[Junction, ...] = ()
+    furnishing: Furnishing = field(default_factory=Furnishing)
 
     @property
     def perimeter(self) -> float:
@@ -194,24 +295,37 @@ class SyntheticScene:
         )
 
 
-def generate_scene(spec: SceneSpec, seed: int) -> SyntheticScene:
-    """Generate a scene; the same (spec, seed) gives identical arrays.
+def generate_scene(spec: SceneSpec, seed: int, outline: FloatArray | None = None) -> SyntheticScene:
+    """Generate a scene; the same (spec, seed, outline) gives identical arrays.
+
+    Parameters
+    ----------
+    spec : SceneSpec
+        What to generate.
+    seed : int
+        Seed of the one random generator everything is drawn from.
+    outline : (V, 2) float64, optional
+        A room shape to use instead of a random one: simple, counter-clockwise, axis-aligned
+        edges, meters (e.g. from :func:`services.synthetic.shapes.clean_outline`). It is
+        shifted so its bounding-box minimum is at the origin and starts at a random vertex;
+        ``n_corners_range``, ``size_range`` and ``shape_family`` are then unused, and with the
+        "arc" cut model a room too short for the drawn fragment count gets as many as fit.
+
+    Returns
+    -------
+    SyntheticScene
+        World frame, z up, floor at z = 0, meters.
 
     >>> scene = generate_scene(SceneSpec(points_per_fragment=(500, 500), furniture=False), 1)
     >>> len(scene.fragments) >= 2 and all(len(f.points) == 500 for f in scene.fragments)
     True
     """
+    if outline is not None and not _usable_outline(outline):
+        raise ValueError("outline must be a simple CCW rectilinear (V, 2) polygon, V >= 4")
     rng = np.random.default_rng(seed)
     height = round(float(rng.uniform(*spec.height_range)), 2)
-    for _ in range(50):
-        room = Room.from_polygon(_random_polygon(rng, spec), height)
-        cuts = _cut_positions(rng, spec, room)
-        if cuts is not None:
-            break
-    else:
-        raise RuntimeError("no room with room for the requested fragments")
-    keep_clear = [(e, t) for e, t, _ in cuts]
-    clear = spec.end_margin + 0.5 * max(abs(g) for g in spec.gap_range)
+    room, cuts = _room_and_cuts(rng, spec, height, outline)
+    keep_clear, clearance = furniture_clearance(spec, cuts)
     furnishing = furnish_room(
         rng,
         room,
@@ -219,12 +333,14 @@ def generate_scene(spec: SceneSpec, seed: int) -> SyntheticScene:
         clutter=spec.clutter,
         furniture=spec.furniture,
         openings=spec.openings,
-        clearance=clear,
+        clearance=clearance,
     )
     ids = rng.permutation(len(cuts))
+    names = [f"frag_{ids[k]:02d}" for k in range(len(cuts))]
+    points_range = _points_range(spec, len(cuts))
     fragments = [
-        _fragment(rng, spec, room, furnishing, stretch, k, f"frag_{ids[k]:02d}")
-        for k, stretch in enumerate(_stretches(room, cuts))
+        _fragment(rng, spec, room, furnishing, stretch, k, names[k], points_range)
+        for k, stretch in enumerate(stretches(room, cuts))
     ]
     lo, hi = room.polygon.min(axis=0), room.polygon.max(axis=0)
     return SyntheticScene(
@@ -235,11 +351,19 @@ def generate_scene(spec: SceneSpec, seed: int) -> SyntheticScene:
         fragments=tuple(sorted(fragments, key=lambda f: f.id)),
         diagonal=float(np.linalg.norm(hi - lo)),
         spec=spec,
+        junctions=_junctions(room, cuts, names),
+        furnishing=furnishing,
     )
 
 
 def ground_truth_json(scene: SyntheticScene) -> dict[str, Any]:
-    """The scene's ground truth as JSON-able data (schema_version 1)."""
+    """The scene's ground truth as JSON-able data (schema_version 1).
+
+    Besides the room, the diagonal, the perimeter and the per-fragment truth (pose,
+    keypoints, loop positions, ``single_wall``), ``junctions`` lists for each fragment in loop
+    order ``{"from": id, "to": next id along the CCW loop, "gap": m (negative: overlap),
+    "turn": 0 straight, +1 / -1 when the junction holds a convex / reflex corner}``.
+    """
     return {
         "schema_version": 1,
         "seed": scene.seed,
@@ -262,11 +386,43 @@ def ground_truth_json(scene: SyntheticScene) -> dict[str, Any]:
                 "loop_index": f.loop_index,
                 "centroid_local": f.centroid_local.tolist(),
                 "n_points": len(f.points),
+                "single_wall": f.single_wall,
             }
             for f in scene.fragments
         ],
+        "junctions": [
+            {"from": j.from_id, "to": j.to_id, "gap": j.gap, "turn": j.turn}
+            for j in scene.junctions
+        ],
         "spec": asdict(scene.spec),
     }
+
+
+def _usable_outline(outline: FloatArray) -> bool:
+    polygon = np.asarray(outline, dtype=np.float64)
+    if polygon.ndim != 2 or polygon.shape[1:] != (2,) or len(polygon) < 4:
+        return False
+    return is_simple_rectilinear(polygon) and signed_area(polygon) > 0.0
+
+
+def _room_and_cuts(
+    rng: np.random.Generator, spec: SceneSpec, height: float, outline: FloatArray | None
+) -> tuple[Room, list[Cut]]:
+    """A room (random, or the outline at a random start vertex) and its cuts; up to 50 tries."""
+    for _ in range(50):
+        if outline is None:
+            polygon = _random_polygon(rng, spec)
+        else:
+            polygon = np.asarray(outline, dtype=np.float64)
+            polygon = np.roll(polygon - polygon.min(axis=0), -int(rng.integers(len(polygon))), 0)
+        room = Room.from_polygon(polygon, height)
+        if spec.cut_model == "arc":
+            cuts = arc_cuts(rng, spec, room, fit=outline is not None)
+        else:
+            cuts = edge_cuts(rng, spec, room)
+        if cuts is not None:
+            return room, cuts
+    raise RuntimeError("no room with room for the requested fragments")
 
 
 def _random_polygon(rng: np.random.Generator, spec: SceneSpec) -> FloatArray:
@@ -274,74 +430,29 @@ def _random_polygon(rng: np.random.Generator, spec: SceneSpec) -> FloatArray:
     size = (round(float(rng.uniform(x_lo, x_hi)), 2), round(float(rng.uniform(y_lo, y_hi)), 2))
     if rng.random() < 0.5:
         size = size[::-1]
-    lo, hi = spec.n_corners_range
-    target = int(rng.choice(np.arange(max(4, lo + lo % 2), hi + 1, 2)))
-    polygon = random_rectilinear_polygon(rng, size, target, spec.min_edge)
-    assert signed_area(polygon) > 0.0
-    return polygon
+    if spec.shape_family == "mixed":
+        family = pick_family(rng, spec.n_corners_range)
+        return random_room(rng, family, size, spec.n_corners_range, spec.min_edge)
+    return random_room(rng, "carved", size, spec.n_corners_range, spec.min_edge)
 
 
-def _cut_positions(
-    rng: np.random.Generator, spec: SceneSpec, room: Room
-) -> list[tuple[int, float, float]] | None:
-    """Where neighbouring stretches meet: (edge, t along it, gap) sorted along the loop.
-
-    gap > 0 leaves that much wall unseen between the two; gap < 0 makes them overlap. Cuts
-    stay ``end_margin`` (plus half the gap) from corners; distinct edges between cuts give
-    every stretch at least one corner; two cuts on one long edge give a straight stretch.
-    """
-    margin = spec.end_margin + 0.5 * max(abs(g) for g in spec.gap_range)
-    slots = [e for e in range(room.n_edges) if room.lengths[e] >= 2 * margin + 0.1]
-    if spec.straight_fragments:
-        slots += [e for e in slots if room.lengths[e] >= 2 * margin + _MIN_STRAIGHT + 0.01]
-    n = min(int(rng.integers(spec.n_fragments_range[0], spec.n_fragments_range[1] + 1)), len(slots))
-    if n < 2:
-        return None
-    edges = np.array(slots)[rng.choice(len(slots), n, replace=False)]
-    cuts: list[tuple[int, float, float]] = []
-    for e in np.unique(edges):
-        length = room.lengths[e]
-        if np.count_nonzero(edges == e) == 1:
-            ts = [rng.uniform(margin, length - margin)]
-        else:
-            first = rng.uniform(margin, length - margin - _MIN_STRAIGHT)
-            ts = [first, rng.uniform(first + _MIN_STRAIGHT, length - margin)]
-        cuts += [(int(e), float(t), float(rng.uniform(*spec.gap_range))) for t in ts]
-    cuts = sorted(cuts, key=lambda c: room.arcs[c[0]] + c[1])
-    if spec.corner_cut_share > 0.0:
-        cuts = _cuts_at_corners(rng, spec, room, cuts)
-    return cuts
+def _junctions(room: Room, cuts: list[Cut], names: list[str]) -> tuple[Junction, ...]:
+    """Junction k: from fragment k (loop order) to k + 1, across cut k + 1."""
+    turns = cut_turns(room, cuts)
+    n = len(cuts)
+    return tuple(
+        Junction(names[k], names[(k + 1) % n], cuts[(k + 1) % n].gap, turns[(k + 1) % n])
+        for k in range(n)
+    )
 
 
-def _cuts_at_corners(
-    rng: np.random.Generator, spec: SceneSpec, room: Room, cuts: list[tuple[int, float, float]]
-) -> list[tuple[int, float, float]]:
-    """Move a share of the cuts onto the corner that starts their edge, with a gap that
-    hides the corner. Only cuts alone on their edge whose previous cut is two or more edges
-    back move, so both neighbouring stretches keep a corner of their own."""
-    edges = [e for e, _, _ in cuts]
-    out = []
-    for k, (e, t, gap) in enumerate(cuts):
-        previous = edges[k - 1]
-        alone = edges.count(e) == 1
-        far = (e - previous) % room.n_edges >= 2 or len(cuts) == 1
-        if rng.random() < spec.corner_cut_share and alone and far:
-            out.append((e, 0.0, float(rng.uniform(_CORNER_GAP[0], _CORNER_GAP[1]))))
-        else:
-            out.append((e, t, gap))
-    return out
-
-
-def _stretches(room: Room, cuts: list[tuple[int, float, float]]) -> list[Stretch]:
-    """Stretch k runs from cut k to cut k + 1 (cyclic), shrunk or grown by half of each gap."""
-    arcs = [room.arcs[e] + t for e, t, _ in cuts]
-    out = []
-    for k, (start, gap) in enumerate(zip(arcs, (g for _, _, g in cuts), strict=True)):
-        nxt = (k + 1) % len(cuts)
-        end = arcs[nxt] + (room.perimeter if nxt == 0 else 0.0) - 0.5 * cuts[nxt][2]
-        begin = start + 0.5 * gap
-        out.append(Stretch(float(np.mod(begin, room.perimeter)), float(end - begin)))
-    return out
+def _points_range(spec: SceneSpec, n_fragments: int) -> tuple[int, int]:
+    """``points_per_fragment``, scaled down so n fragments stay within ``max_scene_points``."""
+    lo, hi = spec.points_per_fragment
+    if spec.max_scene_points <= 0 or n_fragments * hi <= spec.max_scene_points:
+        return lo, hi
+    scale = spec.max_scene_points / (n_fragments * hi)
+    return max(1, int(lo * scale)), max(1, int(hi * scale))
 
 
 def _fragment(
@@ -352,20 +463,13 @@ def _fragment(
     stretch: Stretch,
     loop_index: int,
     fragment_id: str,
+    points_range: tuple[int, int],
 ) -> SyntheticFragment:
-    reach = float(rng.uniform(*spec.floor_reach_range))
-    style = ScanStyle(
-        reach=reach,
-        ceiling_reach=reach * float(rng.uniform(*spec.ceiling_fraction)),
-        falloff=spec.density_falloff,
-        scanner_spacing=spec.scanner_spacing,
-        patch_gain=float(rng.uniform(*spec.patch_gain_range)),
-        see_through=spec.see_through,
-        oversample=spec.oversample,
-    )
-    n_total = int(rng.integers(spec.points_per_fragment[0], spec.points_per_fragment[1] + 1))
+    style = _scan_style(rng, spec)
+    n_total = int(rng.integers(points_range[0], points_range[1] + 1))
     n_outliers = round(n_total * spec.outlier_fraction)
-    true = sample_scan(rng, room, furnishing, stretch, style, n_total - n_outliers)
+    seen = _with_transients(rng, spec, room, furnishing, stretch, style.reach)
+    true = sample_scan(rng, room, seen, stretch, style, n_total - n_outliers)
     noisy = true + rng.normal(scale=rng.uniform(*spec.noise_range), size=true.shape)
     lo, hi = true.min(axis=0), true.max(axis=0)
     world = np.vstack([noisy, rng.uniform(lo, hi, (n_outliers, 3))])
@@ -386,6 +490,41 @@ def _fragment(
         loop_index=loop_index,
         centroid_local=(true.mean(axis=0) - shift) @ rotation,
     )
+
+
+def _scan_style(rng: np.random.Generator, spec: SceneSpec) -> ScanStyle:
+    """One scanner's reach, ceiling reach, patch gain and reach beyond its stretch."""
+    reach = float(rng.uniform(*spec.floor_reach_range))
+    style = ScanStyle(
+        reach=reach,
+        ceiling_reach=reach * float(rng.uniform(*spec.ceiling_fraction)),
+        falloff=spec.density_falloff,
+        scanner_spacing=spec.scanner_spacing,
+        patch_gain=float(rng.uniform(*spec.patch_gain_range)),
+        see_through=spec.see_through,
+        oversample=spec.oversample,
+    )
+    if spec.reach_beyond[1] > 0.0:
+        style = dataclasses.replace(style, beyond=float(rng.uniform(*spec.reach_beyond)))
+    return style
+
+
+def _with_transients(
+    rng: np.random.Generator,
+    spec: SceneSpec,
+    room: Room,
+    furnishing: Furnishing,
+    stretch: Stretch,
+    reach: float,
+) -> Furnishing:
+    """The furnishing plus the objects only this scan sees (``transient_clutter``)."""
+    if spec.transient_clutter[1] <= 0.0:
+        return furnishing
+    level = float(rng.uniform(*spec.transient_clutter))
+    extra = transient_boxes(
+        rng, room, furnishing.boxes, stretch.start, stretch.length, level, reach
+    )
+    return dataclasses.replace(furnishing, boxes=furnishing.boxes + extra)
 
 
 def _random_pose(rng: np.random.Generator, spec: SceneSpec) -> FloatArray:

@@ -15,7 +15,8 @@ from services.synthetic import (
     generate_scene,
     ground_truth_json,
 )
-from services.synthetic.room import Room, nearest_boundary, points_in_polygon
+from services.synthetic.room import BoolArray, Room, nearest_boundary, points_in_polygon
+from services.types import FloatArray
 from tests.services.synthetic.checks import assert_valid_polygon, world_points
 
 pytestmark = pytest.mark.timeout(120)
@@ -178,6 +179,13 @@ def test_ground_truth_json_round_trips(scenes):
     keys = ("pose", "keypoints_local", "keypoints_world", "diagonal", "loop_start", "loop_end")
     assert all(k in first for k in keys)
     assert np.allclose(first["pose"], scene.fragments[0].pose)
+    assert [f["single_wall"] for f in data["fragments"]] == [
+        len(f.keypoints_world) == 2 for f in scene.fragments
+    ]
+    by_loop = sorted(scene.fragments, key=lambda f: f.loop_index)
+    assert [j["from"] for j in data["junctions"]] == [f.id for f in by_loop]
+    assert [j["to"] for j in data["junctions"]] == [f.id for f in by_loop[1:] + by_loop[:1]]
+    assert all(j["turn"] == 0 and -0.3 <= j["gap"] <= 0.3 for j in data["junctions"])
 
 
 def test_presets():
@@ -200,40 +208,121 @@ def test_hard_scenes_allow_straight_fragments_and_tilt():
     assert min(counts) == 2 and max(counts) >= 4
 
 
-def test_edge_exactly_long_enough_for_two_cuts_does_not_break_the_generator():
-    # Seed 70004 draws a 3.8 m edge: exactly two end margins plus a straight stretch, which
-    # rounding once made an empty sampling interval.
-    spec = replace(
-        SceneSpec.paper(),
-        n_fragments_range=(16, 16),
-        n_corners_range=(16, 16),
-        size_range=((14.0, 16.0), (18.0, 20.0)),
-        straight_fragments=True,
-        points_per_fragment=(500, 500),
-        furniture=False,
-    )
-    scene = generate_scene(spec, 70004)
-    assert len(scene.fragments) >= 2
-
-
-def test_cuts_can_fall_on_corners():
-    # A corner then lies in the unseen gap between two neighbours: one ends just before it,
-    # the next starts just after it on the perpendicular wall.
-    spec = replace(SceneSpec.paper(), corner_cut_share=1.0, points_per_fragment=(500, 500))
-    starts_at_corner = 0
-    for seed in range(6):
-        scene = generate_scene(spec, seed)
-        for fragment in scene.fragments:
-            start = fragment.keypoints_world[0]
-            nearest = np.linalg.norm(scene.polygon - start, axis=1).min()
-            assert nearest >= 0.05 - 1e-9  # the corner itself stays unseen
-            starts_at_corner += nearest <= 0.2 + 1e-9
-    assert starts_at_corner >= 3
-
-
 def test_stress_rooms_are_large():
     spec = replace(SceneSpec.stress(), points_per_fragment=(3_000, 3_000))
     scene = generate_scene(spec, 0)
     size = scene.polygon.max(axis=0) - scene.polygon.min(axis=0)
     assert min(size) >= 18.0 and max(size) <= 40.0 and scene.diagonal > 26.0
     assert len(scene.fragments) >= 6
+
+
+# Arc cuts with end_margin = 0: what crosses a cut is seen in part by both neighbours.
+ACROSS = replace(
+    SceneSpec.world(),
+    n_fragments_range=(8, 8),
+    noise_range=(0.0, 0.0),
+    outlier_fraction=0.0,
+    points_per_fragment=(6_000, 6_000),
+    clutter=3.0,
+    reach_beyond=(0.0, 0.0),
+    transient_clutter=(0.0, 0.0),
+)
+L_OUTLINE = np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], dtype=np.float64)
+
+
+def explained(points: FloatArray, scene: SyntheticScene) -> BoolArray:
+    """(N,) True for noise-free points on the room's structure, reveals or furniture."""
+    room = Room.from_polygon(scene.polygon, scene.ceiling_z)
+    distance, _ = nearest_boundary(points[:, :2], room)
+    z = points[:, 2]
+    known = (np.abs(z) < 1e-9) | (np.abs(z - scene.ceiling_z) < 1e-9) | (distance < 1e-9)
+    known |= ~points_in_polygon(points[:, :2], scene.polygon) & (distance < 0.26)
+    for box in scene.furnishing.boxes:
+        known |= np.all((points >= box.lo - 1e-9) & (points <= box.hi + 1e-9), axis=1)
+    return known
+
+
+def test_furniture_across_a_cut_is_seen_by_both_neighbours():
+    # Wall-side furniture (within 6 cm of a wall) seen by two fragments straddles a cut;
+    # with end_margin = 0.5 this happens about once in these three scenes, here 11 times.
+    shared = 0
+    for seed in range(3):
+        scene = generate_scene(ACROSS, seed)
+        room = Room.from_polygon(scene.polygon, scene.ceiling_z)
+        boxes = [
+            box
+            for box in scene.furnishing.boxes
+            if nearest_boundary(np.array([box.lo[:2], box.hi[:2]]), room)[0].min() < 0.06
+        ]
+        seen = np.zeros((len(boxes), len(scene.fragments)), dtype=int)
+        for k, f in enumerate(scene.fragments):
+            p = world_points(f)
+            distance, _ = nearest_boundary(p[:, :2], room)
+            p = p[(distance > 1e-6) & (p[:, 2] > 1e-6)]  # neither wall nor floor
+            for b, box in enumerate(boxes):
+                seen[b, k] = np.count_nonzero(np.all((p >= box.lo) & (p <= box.hi), axis=1))
+        shared += int(np.count_nonzero(np.sum(seen >= 5, axis=1) >= 2))
+    assert shared >= 5
+
+
+def test_openings_cross_cuts_with_end_margin_zero():
+    # With end_margin = 0.5 no opening contains a stretch end (5 do here).
+    crossing = 0
+    for seed in range(3):
+        scene = generate_scene(ACROSS, seed)
+        room = Room.from_polygon(scene.polygon, scene.ceiling_z)
+        ends = np.array([[f.loop_start, f.loop_end] for f in scene.fragments]).ravel()
+        for o in scene.furnishing.openings:
+            lo = room.arcs[o.edge] + o.t0
+            crossing += int(np.any(np.mod(ends - lo, room.perimeter) < o.t1 - o.t0))
+    assert crossing >= 2
+
+
+def test_neighbours_that_overlap_see_the_same_wall_and_floor():
+    spec = replace(ACROSS, furniture=False, openings=False, points_per_fragment=(12_000, 12_000))
+    checked = 0
+    for seed in range(3):
+        scene = generate_scene(spec, seed)
+        room = Room.from_polygon(scene.polygon, scene.ceiling_z)
+        frags = {f.id: f for f in scene.fragments}
+        for junction in (j for j in scene.junctions if j.gap < -0.25):
+            start = frags[junction.to_id].loop_start  # the overlap: [start, start + |gap|]
+            for f in (frags[junction.from_id], frags[junction.to_id]):
+                p = world_points(f)
+                distance, arc = nearest_boundary(p[:, :2], room)
+                inside = np.mod(arc - start, room.perimeter) < -junction.gap
+                wall = inside & (distance < 1e-9) & (p[:, 2] > 0.1)
+                floor = inside & (distance > 0.05) & (np.abs(p[:, 2]) < 1e-9)
+                assert np.count_nonzero(wall) >= 5 and np.count_nonzero(floor) >= 3
+            checked += 1
+    assert checked >= 3
+
+
+def test_transient_clutter_is_seen_by_its_own_scan_only():
+    spec = replace(ACROSS, furniture=False, transient_clutter=(3.0, 3.0))
+    scene = generate_scene(spec, 0)
+    unexplained = [np.mean(~explained(world_points(f), scene)) for f in scene.fragments]
+    assert max(unexplained) > 0.01
+    plain = generate_scene(replace(spec, transient_clutter=(0.0, 0.0)), 0)
+    assert all(explained(world_points(f), plain).all() for f in plain.fragments)
+
+
+def test_a_given_outline_is_the_room():
+    spec = replace(ACROSS, furniture=False, n_fragments_range=(3, 5))
+    scene = generate_scene(spec, 4, outline=L_OUTLINE + np.array([12.0, -3.0]))
+    assert len(scene.polygon) == 6 and np.allclose(scene.polygon.min(axis=0), 0.0)
+    start = int(np.flatnonzero(np.all(scene.polygon == L_OUTLINE[0], axis=1))[0])
+    assert np.array_equal(np.roll(scene.polygon, -start, axis=0), L_OUTLINE)
+    assert 3 <= len(scene.fragments) <= 5
+    with pytest.raises(ValueError):
+        generate_scene(spec, 4, outline=L_OUTLINE[::-1])  # clockwise
+    with pytest.raises(ValueError):
+        generate_scene(spec, 4, outline=np.array([[0, 0], [4, 0], [4, 4.0]]))
+
+
+def test_point_counts_shrink_to_the_scene_budget():
+    spec = replace(ACROSS, furniture=False, points_per_fragment=(1_000, 2_000))
+    counts = [
+        len(f.points) for f in generate_scene(replace(spec, max_scene_points=8_000), 0).fragments
+    ]
+    assert len(counts) == 8 and min(counts) >= 500 and max(counts) <= 1_000
