@@ -7,7 +7,6 @@ ever answers with a traceback.
 from __future__ import annotations
 
 import logging
-import re
 from typing import Any
 
 import redis
@@ -16,6 +15,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from schemas.ids import is_valid_id
 from schemas.service import ErrorBody, ErrorDetail
 from services.errors import (
     FragmentError,
@@ -43,8 +43,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-ID_PATTERN = re.compile(r"[A-Za-z0-9._-]{1,64}")
 
 
 class ServiceError(JigsawError):
@@ -104,7 +102,7 @@ _STATUS: dict[type[JigsawError], int] = {
 }
 
 _DESCRIPTIONS = {
-    400: "invalid id (1 to 64 characters of [A-Za-z0-9._-])",
+    400: "invalid id (1 to 64 characters of [A-Za-z0-9._-], not . or ..)",
     401: "missing bearer token",
     403: "unknown bearer token",
     404: "unknown site or fragment",
@@ -126,8 +124,10 @@ def status_for(exc: JigsawError) -> int:
 
 def check_id(value: str, what: str) -> str:
     """Return ``value`` if it is a valid site or fragment id, else raise InvalidIdError."""
-    if not ID_PATTERN.fullmatch(value):
-        raise InvalidIdError(f"invalid {what} {value[:80]!r}: use 1 to 64 of [A-Za-z0-9._-]")
+    if not is_valid_id(value):
+        raise InvalidIdError(
+            f"invalid {what} {value[:80]!r}: use 1 to 64 of [A-Za-z0-9._-], not . or .."
+        )
     return value
 
 

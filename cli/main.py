@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -116,8 +115,10 @@ SiteOpt = Annotated[str, typer.Option("--site", "-s", help="site id")]
 
 
 def _robot_id(value: str) -> str:
-    if not re.fullmatch(r"[A-Za-z0-9._-]{1,64}", value):
-        raise typer.BadParameter("1 to 64 characters of [A-Za-z0-9._-]")
+    from schemas.ids import is_valid_id
+
+    if not is_valid_id(value):
+        raise typer.BadParameter("1 to 64 characters of [A-Za-z0-9._-], not . or ..")
     return value
 
 

@@ -12,9 +12,9 @@ ID_REGEX = re.compile(ID_PATTERN)
 
 
 def is_valid_id(value: str) -> bool:
-    """True for a usable id.
+    r"""True for a usable id.
 
-    >>> [is_valid_id(v) for v in ("frag_00", "a.b-c", "..", ".", "", "a/b")]
-    [True, True, False, False, False, False]
+    >>> [is_valid_id(v) for v in ("frag_00", "a.b-c", "..", ".", "", "a/b", "a\n")]
+    [True, True, False, False, False, False, False]
     """
-    return ID_REGEX.match(value) is not None
+    return ID_REGEX.fullmatch(value) is not None  # match() would let "$" pass a final newline

@@ -6,15 +6,23 @@ fragment payload (the file's bytes) and the ROS 2 topics (CDR, as rmw_zenoh send
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field
+
+from schemas.ids import is_valid_id
 
 __all__ = ["PoseUpdate", "RobotTag", "SenderRecord", "ServiceInfo"]
 
 
 class _Wire(BaseModel):
     model_config = ConfigDict(frozen=True)
+
+
+def _valid_id(value: str | None) -> str | None:
+    if value is not None and not is_valid_id(value):
+        raise ValueError("an id is 1 to 64 characters of [A-Za-z0-9._-], not . or ..")
+    return value
 
 
 class PoseUpdate(_Wire):
@@ -46,7 +54,9 @@ class RobotTag(_Wire):
 
     model_config = ConfigDict(frozen=True, extra="ignore")
 
-    robot_id: str | None = Field(None, pattern=r"^[A-Za-z0-9._-]{1,64}$")
+    robot_id: Annotated[str | None, AfterValidator(_valid_id)] = Field(
+        None, description="1 to 64 characters of [A-Za-z0-9._-], not . or .."
+    )
     token: str | None = None
 
 

@@ -16,12 +16,11 @@ P/service                               queryable   ServiceInfo JSON (limits)
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 
-__all__ = ["ZenohKeys"]
+from schemas.ids import is_valid_id
 
-_ID = re.compile(r"[A-Za-z0-9._-]{1,64}")
+__all__ = ["ZenohKeys"]
 
 
 @dataclass(frozen=True)
@@ -66,11 +65,12 @@ class ZenohKeys:
         return key[len(head) :].split("/") if key.startswith(head) else None
 
     def parse_fragment(self, key: str) -> tuple[str, str] | None:
-        """``(site_id, fragment_id)`` of a concrete fragment key, else None.
+        """``(site_id, fragment_id)`` of a fragment key, else None (ids are not checked here:
+        a wildcard chunk comes back as it is, and the ingest refuses it as an invalid id).
 
         >>> ZenohKeys().parse_fragment("fpj/sites/lab/fragments/f1")
         ('lab', 'f1')
-        >>> ZenohKeys().parse_fragment("fpj/sites/*/fragments/f1") is None
+        >>> ZenohKeys().parse_fragment("fpj/sites/lab/result") is None
         True
         """
         chunks = self._chunks(key)
@@ -90,4 +90,4 @@ class ZenohKeys:
         chunks = self._chunks(key)
         if chunks is None or len(chunks) != 2 or chunks[0] != "robots":
             return None
-        return chunks[1] if _ID.fullmatch(chunks[1]) else None
+        return chunks[1] if is_valid_id(chunks[1]) else None

@@ -132,6 +132,9 @@ def test_conflict(http, redis_client: Any) -> None:
         "/v1/sites/site-1/fragments/" + "x" * 65,
         "/v1/sites/site-1/fragments/a%3Ab",
         "/v1/sites/caf%C3%A9/fragments/a",
+        "/v1/sites/site-1/fragments/%2E%2E",  # ".." and "." name no file or key
+        "/v1/sites/site-1/fragments/%2E",
+        "/v1/sites/site-1/fragments/a%0A",  # a final newline
     ],
 )
 def test_invalid_ids(http, redis_client: Any, path: str) -> None:
