@@ -17,6 +17,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from schemas.ids import is_valid_id
 from schemas.service import ErrorBody, ErrorDetail
+from schemas.validation import summarize_errors
 from services.errors import (
     FragmentError,
     FragmentTooLargeError,
@@ -29,7 +30,11 @@ __all__ = [
     "ConflictError",
     "ForbiddenError",
     "FragmentNotFoundError",
+    "HintsNotFoundError",
+    "HintsTooLargeError",
+    "InvalidHintsError",
     "InvalidIdError",
+    "InvalidPriorError",
     "NotFoundError",
     "ServiceError",
     "SiteNotFoundError",
@@ -67,6 +72,26 @@ class FragmentNotFoundError(NotFoundError):
     code = "fragment_not_found"
 
 
+class HintsNotFoundError(NotFoundError):
+    code = "hints_not_found"
+
+
+class InvalidHintsError(ServiceError):
+    """Hints that are not JSON, have unknown fields or invalid values (contract section 2)."""
+
+    code = "invalid_hints"
+
+
+class InvalidPriorError(InvalidHintsError):
+    """A fragment's ``prior`` (zenoh attachment) that is not a valid hints entry."""
+
+    code = "invalid_prior"
+
+
+class HintsTooLargeError(InvalidHintsError):
+    code = "hints_too_large"
+
+
 class ConflictError(ServiceError):
     """Different bytes under an id that already holds a fragment."""
 
@@ -95,9 +120,11 @@ _STATUS: dict[type[JigsawError], int] = {
     NotFoundError: 404,
     ConflictError: 409,
     FragmentTooLargeError: 413,
+    HintsTooLargeError: 413,
     UnsupportedFormatError: 415,
     InvalidFragmentError: 422,
     FragmentError: 422,
+    InvalidHintsError: 422,
     UnavailableError: 503,
 }
 
@@ -105,11 +132,11 @@ _DESCRIPTIONS = {
     400: "invalid id (1 to 64 characters of [A-Za-z0-9._-], not . or ..)",
     401: "missing bearer token",
     403: "unknown bearer token",
-    404: "unknown site or fragment",
+    404: "unknown site or fragment, or no hints stored",
     409: "different bytes already stored under this fragment id",
-    413: "upload too large (bytes or points)",
+    413: "body too large (bytes or points)",
     415: "not a PLY or PCD file",
-    422: "invalid content: empty, truncated, malformed, too few finite points",
+    422: "invalid content: empty, truncated, malformed, too few finite points; invalid hints",
     503: "Redis unreachable; retry later",
 }
 
@@ -168,8 +195,7 @@ async def _on_redis_down(request: Request, exc: Exception) -> JSONResponse:
 
 async def _on_validation(request: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, RequestValidationError)
-    parts = [f"{'.'.join(str(p) for p in e.get('loc', ()))}: {e.get('msg')}" for e in exc.errors()]
-    return JSONResponse(error_body("invalid_request", "; ".join(parts)), status_code=422)
+    return JSONResponse(error_body("invalid_request", summarize_errors(exc.errors())), 422)
 
 
 async def _on_http(request: Request, exc: Exception) -> JSONResponse:

@@ -19,6 +19,7 @@ import redis
 from api.backend import Backend
 from api.errors import ConflictError, check_id
 from api.metrics import UPLOAD_BYTES, UPLOADS
+from api.store import touch_site
 from schemas.jobs import FragmentState, LayoutJob, encode_job
 from schemas.service import UploadReply
 from services.errors import FragmentTooLargeError, InvalidFragmentError, JigsawError
@@ -152,7 +153,7 @@ def _reply(
 async def _store_new(backend: Backend, job: LayoutJob, fields: dict[str, str], blob: bytes) -> bool:
     """Store a new fragment and enqueue its job, unless the id got taken meanwhile."""
     keys, site_id, fid = backend.keys, job.site_id, job.fragment_id
-    fragment, site = keys.fragment(site_id, fid), keys.site(site_id)
+    fragment = keys.fragment(site_id, fid)
     now = float(fields["created_at"])
     async with backend.redis.pipeline(transaction=True) as pipe:
         try:
@@ -165,9 +166,7 @@ async def _store_new(backend: Backend, job: LayoutJob, fields: dict[str, str], b
             pipe.set(keys.fragment_data(site_id, fid), blob)
             pipe.delete(keys.fragment_layout(site_id, fid))
             pipe.zadd(keys.fragments(site_id), {fid: now}, nx=True)
-            pipe.hsetnx(site, "created_at", repr(now))
-            pipe.hset(site, "updated_at", repr(now))
-            pipe.zadd(keys.sites, {site_id: now}, nx=True)
+            touch_site(pipe, keys, site_id, now)
             pipe.xadd(keys.jobs, {"job": encode_job(job)})
             await pipe.execute()
         except redis.WatchError:

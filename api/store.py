@@ -1,4 +1,4 @@
-"""What the API reads from Redis (site status, results, lists) and the fragment delete."""
+"""What the API reads from Redis (site status, results, lists), and the deletes."""
 
 from __future__ import annotations
 
@@ -6,18 +6,20 @@ import time
 from typing import Any
 
 import redis
+import redis.asyncio as aioredis
 
 from api.backend import Backend
-from api.errors import FragmentNotFoundError
+from api.errors import FragmentNotFoundError, SiteNotFoundError
 from api.zenoh.presence import load_site_robots
 from schemas.service import FragmentStatus, SiteList, SiteStatus, SiteSummary
 from worker.connection import abort_watch, begin_multi, record, strings
 from worker.jobs import request_placement_async
-from worker.keys import GROUP
+from worker.keys import GROUP, Keys
 from worker.records import fragment_status, placement_status, site_event, site_status
 
 __all__ = [
     "delete_fragment",
+    "delete_site",
     "list_sites",
     "live_workers",
     "load_fragment",
@@ -25,12 +27,21 @@ __all__ = [
     "load_site_status",
     "queue_counts",
     "site_exists",
+    "touch_site",
 ]
 
 
 async def site_exists(backend: Backend, site_id: str) -> bool:
-    """True once a fragment of the site has been accepted."""
+    """True once a fragment (or hints) of the site has been accepted, until it is deleted."""
     return await backend.redis.zscore(backend.keys.sites, site_id) is not None
+
+
+def touch_site(pipe: aioredis.client.Pipeline, keys: Keys, site_id: str, now: float) -> None:
+    """Queue the commands that create the site if new and mark it updated (inside a MULTI)."""
+    site = keys.site(site_id)
+    pipe.hsetnx(site, "created_at", repr(now))
+    pipe.hset(site, "updated_at", repr(now))
+    pipe.zadd(keys.sites, {site_id: now}, nx=True)
 
 
 async def load_site_status(backend: Backend, site_id: str) -> SiteStatus:
@@ -40,10 +51,12 @@ async def load_site_status(backend: Backend, site_id: str) -> SiteStatus:
     ids = strings(await r.zrange(keys.fragments(site_id), 0, -1))
     async with r.pipeline(transaction=False) as pipe:
         pipe.hgetall(keys.site(site_id))
+        pipe.exists(keys.hints(site_id))
         for fid in ids:
             pipe.hgetall(keys.fragment(site_id, fid))
         replies: list[Any] = await pipe.execute()
-    status = site_status(site_id, replies[0], list(zip(ids, replies[1:], strict=True)))
+    fragments = list(zip(ids, replies[2:], strict=True))
+    status = site_status(site_id, replies[0], fragments, hints=bool(replies[1]))
     robots = await load_site_robots(backend, site_id, [f.fragment_id for f in status.fragments])
     return status.model_copy(update={"robots": robots})
 
@@ -109,6 +122,37 @@ async def delete_fragment(backend: Backend, site_id: str, fragment_id: str) -> N
     event = site_event(
         "fragment", site_id, {"fragment_id": fragment_id, "deleted": True}, fragment_id=fragment_id
     )
+    await r.publish(keys.site_channel(site_id), event)
+
+
+async def delete_site(backend: Backend, site_id: str) -> None:
+    """Remove the site and everything stored for it (fragments, layouts, result, hints,
+    status, senders); its queued jobs then find nothing to do. Subscribers of its events get
+    a last ``site`` event ``{"deleted": true}``.
+
+    Raises
+    ------
+    SiteNotFoundError
+        No such site (or it was deleted meanwhile).
+    """
+    keys, r = backend.keys, backend.redis
+    async with r.pipeline(transaction=True) as pipe:
+        while True:
+            try:
+                # An upload or hints arriving meanwhile change one of these: then start over.
+                await pipe.watch(keys.site(site_id), keys.fragments(site_id))
+                if await pipe.zscore(keys.sites, site_id) is None:
+                    await abort_watch(pipe)
+                    raise SiteNotFoundError(f"unknown site {site_id!r}")
+                ids = strings(await pipe.zrange(keys.fragments(site_id), 0, -1))
+                begin_multi(pipe)
+                pipe.delete(*keys.site_keys(site_id, ids))
+                pipe.zrem(keys.sites, site_id)
+                await pipe.execute()
+                break
+            except redis.WatchError:
+                continue
+    event = site_event("site", site_id, {"deleted": True})
     await r.publish(keys.site_channel(site_id), event)
 
 

@@ -11,6 +11,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from schemas.jobs import FragmentState, PlacementState
+from schemas.result import Status
 
 __all__ = [
     "EVENT_VERSION",
@@ -84,8 +85,14 @@ class PlacementStatus(_Wire):
     error: ErrorDetail | None = None
     generation: int = Field(0, description="changes of the site's set of usable layouts")
     result_generation: int | None = Field(None, description="generation the result is of")
-    result_status: Literal["closed", "open", "failed"] | None = None
-    loop_closed: bool = False
+    result_status: Status | None = Field(None, description="status of the newest result")
+    confidence: float | None = Field(
+        None, ge=0.0, le=1.0, description="the newest result's confidence in its main assembly"
+    )
+    alternatives: int = Field(0, ge=0, description="runners-up in the newest result")
+    loop_closed: bool = Field(
+        False, description="the newest result closes a room (status closed or ambiguous)"
+    )
     last_placement_at: float | None = Field(None, description="unix time of the last result")
     started_at: float | None = Field(None, description="unix time the newest run started")
 
@@ -109,6 +116,7 @@ class SiteStatus(_Wire):
     robots: list[RobotStatus] = Field(
         default_factory=list, description="robots connected over zenoh now (contract 5)"
     )
+    hints: bool = Field(False, description="hints are stored (GET /v1/sites/{site}/hints)")
 
 
 class SiteSummary(_Wire):
@@ -145,12 +153,14 @@ class SiteEvent(_Wire):
     """A message on a site's Redis channel, forwarded as one server-sent event.
 
     ``type``: ``fragment`` (state, stage, progress of one fragment; ``data`` a FragmentStatus,
-    or ``{"fragment_id", "deleted": true}``), ``placement`` (``data`` a PlacementStatus) or
-    ``result`` (``data`` the result JSON of the contract).
+    or ``{"fragment_id", "deleted": true}``), ``placement`` (``data`` a PlacementStatus, with
+    the newest result's status and confidence), ``result`` (``data`` the result JSON of the
+    contract: status, confidence, alternatives) or ``site`` (``data`` ``{"deleted": true}``:
+    the site was deleted; its event stream ends).
     """
 
     version: Literal[1] = 1
-    type: Literal["fragment", "placement", "result"]
+    type: Literal["fragment", "placement", "result", "site"]
     site_id: str
     fragment_id: str | None = None
     generation: int | None = None

@@ -1,8 +1,8 @@
 """The two job handlers: a fragment's local layout, and a site's global placement.
 
 Handlers are idempotent: a job delivered twice (at-least-once) finds its work done, or its
-fragment replaced or deleted (``sha256`` mismatch), and changes nothing (see
-:mod:`worker.updates` for the conditional writes).
+fragment replaced or deleted (``sha256`` mismatch), or its site deleted, and changes nothing
+(see :mod:`worker.updates` for the conditional writes).
 """
 
 from __future__ import annotations
@@ -13,18 +13,21 @@ import zlib
 from dataclasses import dataclass
 from typing import Protocol, TypeVar
 
+from pydantic import ValidationError
+
+from schemas.hints import HintsModel
 from schemas.jobs import FragmentState, LayoutJob, PlacementJob, PlacementState
 from schemas.layout import LocalLayoutWire
 from schemas.result import FragmentResultModel, ResultModel
 from schemas.service import ErrorDetail
 from services.types import LocalLayout
-from worker.connection import strings
 from worker.jobs import finish_placement, placement_flag_ttl_ms
 from worker.records import error_fields
 from worker.updates import (
     JobContext,
     JobTimeoutError,
     Progress,
+    set_site_fields,
     store_result,
     update_fragment,
     update_placement,
@@ -107,14 +110,19 @@ class LayoutHandler:
 @dataclass(frozen=True)
 class _SiteSnapshot:
     generation: int
+    created: str | None  # the site hash's created_at (None: the site does not exist)
     fragments: list[tuple[str, dict[str, str]]]  # upload order
     layouts: dict[str, str]  # fragment id -> LocalLayoutWire JSON, of done fragments
+    hints: str | None  # HintsModel JSON
 
 
 def _snapshot(ctx: JobContext, site_id: str) -> _SiteSnapshot:
     keys = ctx.keys
-    generation = int(ctx.client.hget(keys.site(site_id), "generation") or 0)
-    ids = strings(ctx.client.zrange(keys.fragments(site_id), 0, -1))
+    with ctx.client.pipeline(transaction=True) as pipe:
+        pipe.hmget(keys.site(site_id), "generation", "created_at")
+        pipe.zrange(keys.fragments(site_id), 0, -1)
+        pipe.get(keys.hints(site_id))
+        (generation, created), ids, hints = pipe.execute()
     with ctx.client.pipeline(transaction=False) as pipe:
         for fid in ids:
             pipe.hgetall(keys.fragment(site_id, fid))
@@ -128,7 +136,18 @@ def _snapshot(ctx: JobContext, site_id: str) -> _SiteSnapshot:
         for fid, rec, raw in zip(ids, records, replies[len(ids) :], strict=True)
         if rec.get("state") == FragmentState.DONE.value and raw
     }
-    return _SiteSnapshot(generation, fragments, layouts)
+    return _SiteSnapshot(int(generation or 0), created, fragments, layouts, hints)
+
+
+def _hints(site_id: str, raw: str | None) -> HintsModel | None:
+    """The stored hints; unreadable ones (written by a newer version) are left out."""
+    if raw is None:
+        return None
+    try:
+        return HintsModel.model_validate_json(raw)
+    except ValidationError as exc:
+        log.warning("site %s: stored hints ignored, not valid: %s", site_id, exc)
+        return None
 
 
 def _failed_result(fragments: list[tuple[str, dict[str, str]]]) -> ResultModel:
@@ -149,7 +168,9 @@ def _place(ctx: JobContext, site_id: str, snap: _SiteSnapshot) -> ResultModel:
         fid: LocalLayoutWire.model_validate_json(raw).to_layout()
         for fid, raw in snap.layouts.items()
     }
-    result: ResultModel = place_site(layouts, ctx.params, progress=Progress(ctx, site_id, None))
+    progress = Progress(ctx, site_id, None)
+    hints = _hints(site_id, snap.hints)
+    result: ResultModel = place_site(layouts, ctx.params, progress=progress, hints=hints)
     return result
 
 
@@ -163,10 +184,15 @@ class PlacementHandler:
         if holder is not None and holder != job.job_id:
             log.info("placement job %s superseded by %s", job.job_id, holder)
             return
+        if not ctx.client.exists(ctx.keys.site(site_id)):
+            log.info("placement job %s: site %s was deleted", job.job_id, site_id)
+            return
         ctx.client.set(flag, job.job_id, px=placement_flag_ttl_ms(ctx.settings))
         snap = _snapshot(ctx, site_id)
-        ctx.client.hset(ctx.keys.site(site_id), "placement_generation", str(snap.generation))
-        if any(rec.get("state") in _PENDING for _, rec in snap.fragments):
+        set_site_fields(ctx, site_id, {"placement_generation": str(snap.generation)})
+        if snap.created is None:  # deleted meanwhile: write nothing; the flag is released
+            log.info("placement job %s: site %s was deleted", job.job_id, site_id)
+        elif any(rec.get("state") in _PENDING for _, rec in snap.fragments):
             self._wait_for_layouts(ctx, site_id)
         elif not snap.fragments:
             self._clear(ctx, site_id)
@@ -179,7 +205,8 @@ class PlacementHandler:
                 placement_progress="0",
                 placement_started_at=repr(time.time()),
             )
-            store_result(ctx, site_id, snap.generation, _place(ctx, site_id, snap))
+            result = _place(ctx, site_id, snap)
+            store_result(ctx, site_id, snap.generation, result, site_created=snap.created)
         finish_placement(ctx.client, ctx.keys, ctx.settings, job, snap.generation)
 
     @staticmethod
@@ -199,6 +226,8 @@ class PlacementHandler:
             ctx.keys.site(site_id),
             "result_generation",
             "result_status",
+            "result_confidence",
+            "result_alternatives",
             "loop_closed",
             "last_placement_at",
         )

@@ -1,10 +1,10 @@
 """Putting jobs on the stream, per-site placement coalescing, acknowledgements, dead letters.
 
 Placement coalescing. A site's hash holds ``generation``, bumped (atomically, by
-:data:`REQUEST_PLACEMENT_LUA`) whenever the set of usable layouts changes. The key
-``P:site:S:placement`` names the one placement job queued or running for the site; a request
-that finds it taken only bumps the generation. The job remembers the generation it started
-from; when it finishes, :func:`finish_placement` re-enqueues exactly one more run if the
+:data:`REQUEST_PLACEMENT_LUA`) whenever the set of usable layouts or the site's hints change.
+The key ``P:site:S:placement`` names the one placement job queued or running for the site; a
+request that finds it taken only bumps the generation. The job remembers the generation it
+started from; when it finishes, :func:`finish_placement` re-enqueues exactly one more run if the
 generation moved meanwhile (the "dirty" case) and otherwise releases the key, in one
 WATCH/MULTI transaction so no request is lost between the check and the release.
 """
@@ -43,9 +43,11 @@ DEAD_LETTER_MAXLEN = 10_000
 Extra = Callable[[redis.client.Pipeline], None]
 
 # Lua function shared by scripts: bump the site generation and enqueue a placement job unless
-# one is queued or running. Returns {generation, 1 if a job was enqueued else 0}.
+# one is queued or running. Returns {generation, 1 if a job was enqueued else 0}; {0, 0} for
+# a site that does not exist (deleted: nothing may bring its hash back).
 REQUEST_PLACEMENT_FUNCTION = """
 local function request_placement(site, flag, stream, job_id, job_json, ttl_ms, now)
+  if redis.call('EXISTS', site) == 0 then return {0, 0} end
   local generation = redis.call('HINCRBY', site, 'generation', 1)
   redis.call('HSET', site, 'updated_at', now)
   if redis.call('SET', flag, job_id, 'NX', 'PX', ttl_ms) then
@@ -82,7 +84,8 @@ def placement_args(keys: Keys, settings: Settings, site_id: str) -> tuple[list[s
 
 
 def request_placement(client: redis.Redis, keys: Keys, settings: Settings, site_id: str) -> int:
-    """Note that the site changed and make sure one placement will run; returns generation."""
+    """Note that the site changed and make sure one placement will run; returns generation
+    (0 when the site does not exist)."""
     names, args = placement_args(keys, settings, site_id)
     reply = client.register_script(REQUEST_PLACEMENT_LUA)(keys=names, args=args)
     return int(reply[0])
@@ -91,7 +94,7 @@ def request_placement(client: redis.Redis, keys: Keys, settings: Settings, site_
 async def request_placement_async(
     client: aioredis.Redis, keys: Keys, settings: Settings, site_id: str
 ) -> int:
-    """:func:`request_placement` for the asyncio client (the API's delete path)."""
+    """:func:`request_placement` for the asyncio client (fragment deletes, hints)."""
     names, args = placement_args(keys, settings, site_id)
     reply = await client.register_script(REQUEST_PLACEMENT_LUA)(keys=names, args=args)
     return int(reply[0])

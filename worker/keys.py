@@ -18,17 +18,22 @@ P:site:S:frag:F           hash    fragment record: sha256, size, state, stage, p
 P:site:S:frag:F:data      string  the uploaded file bytes, zlib-compressed
 P:site:S:frag:F:layout    string  LocalLayoutWire JSON
 P:site:S:result           string  ResultModel JSON of the newest placement
+P:site:S:hints            string  HintsModel JSON (contract section 2), replaced as a whole
 P:site:S:placement        string  id of the one queued/running placement job (with TTL)
-P:site:S:events           pubsub  SiteEvent JSON (fragment, placement, result)
+P:site:S:events           pubsub  SiteEvent JSON (fragment, placement, result, site)
 P:site:S:senders          hash    fragment id -> SenderRecord JSON (zenoh robot, ROS topic)
 P:results                 pubsub  ``{"site_id", "generation", "result"}`` per placement
 P:presence                zset    zenoh front end id -> last presence refresh (unix time)
 P:presence:Z              hash    robot id -> connected since, as seen by front end Z (TTL)
 ========================  ======  =======================================================
+
+A site exists while its hash ``P:site:S`` does (created with its entry in ``P:sites``);
+:meth:`Keys.site_keys` lists every key a site owns, for deleting it.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 __all__ = ["GROUP", "Keys"]
@@ -83,6 +88,9 @@ class Keys:
     def result(self, site_id: str) -> str:
         return f"{self.prefix}:site:{site_id}:result"
 
+    def hints(self, site_id: str) -> str:
+        return f"{self.prefix}:site:{site_id}:hints"
+
     def placement_flag(self, site_id: str) -> str:
         return f"{self.prefix}:site:{site_id}:placement"
 
@@ -95,6 +103,24 @@ class Keys:
 
     def site_senders(self, site_id: str) -> str:
         return f"{self.prefix}:site:{site_id}:senders"
+
+    def site_keys(self, site_id: str, fragment_ids: Iterable[str]) -> list[str]:
+        """Every key the site owns, given its fragment ids (not its entry in ``P:sites``)."""
+        names = [
+            self.site(site_id),
+            self.fragments(site_id),
+            self.result(site_id),
+            self.hints(site_id),
+            self.placement_flag(site_id),
+            self.site_senders(site_id),
+        ]
+        for fid in fragment_ids:
+            names += [
+                self.fragment(site_id, fid),
+                self.fragment_data(site_id, fid),
+                self.fragment_layout(site_id, fid),
+            ]
+        return names
 
     @property
     def presence_fronts(self) -> str:

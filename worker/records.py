@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
-from typing import Any, Literal
+from typing import Any, Literal, get_args
 
 from schemas.jobs import FragmentState, PlacementState
+from schemas.result import Status
 from schemas.service import (
     ErrorDetail,
     FragmentStatus,
@@ -20,6 +21,7 @@ from schemas.service import (
 )
 
 __all__ = [
+    "CLOSED_STATUSES",
     "error_fields",
     "fragment_status",
     "new_fragment_record",
@@ -28,9 +30,9 @@ __all__ = [
     "site_status",
 ]
 
-EventKind = Literal["fragment", "placement", "result"]
-ResultStatus = Literal["closed", "open", "failed"]
-_RESULT_STATUSES: dict[str, ResultStatus] = {"closed": "closed", "open": "open", "failed": "failed"}
+EventKind = Literal["fragment", "placement", "result", "site"]
+_RESULT_STATUSES: dict[str, Status] = {status: status for status in get_args(Status)}
+CLOSED_STATUSES = ("closed", "ambiguous")  # the main assembly closes a room (loop_closed)
 
 
 def _float(record: Mapping[str, str], name: str, default: float = 0.0) -> float:
@@ -100,6 +102,7 @@ def placement_status(record: Mapping[str, str]) -> PlacementStatus:
     result_generation = record.get("result_generation")
     last = record.get("last_placement_at")
     started = record.get("placement_started_at")
+    confidence = record.get("result_confidence")
     return PlacementStatus(
         state=PlacementState(record.get("placement_state") or PlacementState.IDLE.value),
         stage=record.get("placement_stage", ""),
@@ -108,6 +111,8 @@ def placement_status(record: Mapping[str, str]) -> PlacementStatus:
         generation=_int(record, "generation"),
         result_generation=int(result_generation) if result_generation else None,
         result_status=result_status,
+        confidence=min(1.0, max(0.0, float(confidence))) if confidence else None,
+        alternatives=_int(record, "result_alternatives"),
         loop_closed=record.get("loop_closed") == "1",
         last_placement_at=float(last) if last else None,
         started_at=float(started) if started else None,
@@ -118,14 +123,18 @@ def site_status(
     site_id: str,
     site: Mapping[str, str],
     fragments: list[tuple[str, Mapping[str, str]]],
+    *,
+    hints: bool = False,
 ) -> SiteStatus:
-    """The wire status of a site from its hash and its fragments' hashes (in order)."""
+    """The wire status of a site from its hash and its fragments' hashes (in order);
+    ``hints``: the site has stored hints."""
     return SiteStatus(
         site_id=site_id,
         created_at=_float(site, "created_at"),
         updated_at=_float(site, "updated_at"),
         fragments=[fragment_status(fid, rec) for fid, rec in fragments if rec],
         placement=placement_status(site),
+        hints=hints,
     )
 
 

@@ -1,8 +1,10 @@
 """Writes of the job handlers to Redis, each followed by its event on the site's channel.
 
 Fragment writes are conditional on the fragment's ``sha256`` (one Lua script), so a deleted or
-replaced fragment is never brought back; a placement result is stored only if its generation
-is not older than the stored one (WATCH/MULTI).
+replaced fragment is never brought back; site writes are conditional on the site's hash
+existing, so a deleted site is never brought back either; a placement result is stored only
+if its generation is not older than the stored one and the site is the one the job started
+on (WATCH/MULTI).
 """
 
 from __future__ import annotations
@@ -23,12 +25,19 @@ from services.errors import JigsawError
 from worker.connection import hash_fields, watch
 from worker.jobs import REQUEST_PLACEMENT_FUNCTION, placement_args
 from worker.keys import Keys
-from worker.records import error_fields, fragment_status, placement_status, site_event
+from worker.records import (
+    CLOSED_STATUSES,
+    error_fields,
+    fragment_status,
+    placement_status,
+    site_event,
+)
 
 __all__ = [
     "JobContext",
     "JobTimeoutError",
     "Progress",
+    "set_site_fields",
     "store_result",
     "update_fragment",
     "update_placement",
@@ -50,6 +59,15 @@ end
 return redis.call('HGETALL', KEYS[1])
 """
 )
+
+
+# KEYS: site hash. ARGV: field/value pairs. Sets them only if the site exists; returns its
+# new hash, or nil.
+_SET_SITE_LUA = """
+if redis.call('EXISTS', KEYS[1]) == 0 then return false end
+redis.call('HSET', KEYS[1], unpack(ARGV))
+return redis.call('HGETALL', KEYS[1])
+"""
 
 
 class JobTimeoutError(JigsawError):
@@ -111,13 +129,19 @@ def update_fragment(
     return True
 
 
+def set_site_fields(ctx: JobContext, site_id: str, fields: Mapping[str, str]) -> dict[str, str]:
+    """Set fields of an existing site's hash; returns the new hash (empty: no such site)."""
+    args = [item for pair in {**fields, "updated_at": repr(time.time())}.items() for item in pair]
+    script = ctx.client.register_script(_SET_SITE_LUA)
+    return _pairs(script(keys=[ctx.keys.site(site_id)], args=args))
+
+
 def update_placement(ctx: JobContext, site_id: str, **fields: str) -> None:
-    """Set placement fields of the site hash and publish the placement status."""
-    site = ctx.keys.site(site_id)
-    with ctx.client.pipeline() as pipe:
-        pipe.hset(site, mapping=hash_fields({**fields, "updated_at": repr(time.time())}))
-        pipe.hgetall(site)
-        _, record = pipe.execute()
+    """Set placement fields of the site hash and publish the placement status (nothing for a
+    site that was deleted)."""
+    record = set_site_fields(ctx, site_id, fields)
+    if not record:
+        return
     status = placement_status(record)
     ctx.client.publish(
         ctx.keys.site_channel(site_id),
@@ -154,14 +178,27 @@ class Progress:
             update_fragment(self.ctx, self.site_id, fid, sha, {"stage": stage, "progress": value})
 
 
-def store_result(ctx: JobContext, site_id: str, generation: int, result: ResultModel) -> bool:
-    """Store a result unless a newer generation's result is already there."""
+def store_result(
+    ctx: JobContext,
+    site_id: str,
+    generation: int,
+    result: ResultModel,
+    *,
+    site_created: str | None = None,
+) -> bool:
+    """Store a result unless a newer generation's result is already there.
+
+    Nothing is stored for a site that does not exist, nor, with ``site_created`` (the site
+    hash's ``created_at`` when the job started), for a site deleted and created again since.
+    """
     site = ctx.keys.site(site_id)
     body = result.model_dump_json()
     fields = {
         "result_generation": str(generation),
         "result_status": result.status,
-        "loop_closed": "1" if result.status == "closed" else "0",
+        "result_confidence": repr(result.confidence),
+        "result_alternatives": str(len(result.alternatives)),
+        "loop_closed": "1" if result.status in CLOSED_STATUSES else "0",
         "last_placement_at": repr(time.time()),
         "placement_state": PlacementState.DONE.value,
         "placement_stage": "done",
@@ -172,8 +209,9 @@ def store_result(ctx: JobContext, site_id: str, generation: int, result: ResultM
         while True:
             try:
                 watch(pipe, site)
-                stored = pipe.hget(site, "result_generation")
-                if stored and int(stored) > generation:
+                stored, created = pipe.hmget(site, "result_generation", "created_at")
+                gone = created is None or site_created not in (None, created)
+                if gone or (stored and int(stored) > generation):
                     pipe.unwatch()
                     return False
                 pipe.multi()

@@ -3,17 +3,22 @@
 from __future__ import annotations
 
 import asyncio
+import json
 import threading
 import time
+from collections.abc import Awaitable, Callable
+from typing import Any
 
 import pytest
 import redis
 
 from api.backend import Backend
+from api.hints import replace_hints
 from api.ingest import ingest_fragment
-from api.store import delete_fragment
+from api.store import delete_fragment, delete_site
+from schemas.hints import HintsModel
 from schemas.jobs import LayoutJob, PlacementJob, decode_job
-from schemas.result import ResultModel
+from schemas.result import AlternativeModel, ResultModel
 from services.point_io import encode_ply
 from services.synthetic import SceneSpec, SyntheticScene, generate_scene
 from tests.service_fixtures import make_settings
@@ -42,27 +47,29 @@ def setup(any_redis: str):
     raw.close()
 
 
-def _upload(settings, site: str, fragments: dict[str, bytes]) -> None:
-    async def run() -> None:
+def _api(settings, call: Callable[[Backend], Awaitable[Any]]) -> Any:
+    """Run one of the API's store functions, as the HTTP and zenoh front ends do."""
+
+    async def run() -> Any:
         backend = await Backend.connect(settings)
         try:
-            for fid, data in fragments.items():
-                await ingest_fragment(backend, site, fid, data)
+            return await call(backend)
         finally:
             await backend.aclose()
 
-    asyncio.run(run())
+    return asyncio.run(run())
+
+
+def _upload(settings, site: str, fragments: dict[str, bytes]) -> None:
+    async def upload(backend: Backend) -> None:
+        for fid, data in fragments.items():
+            await ingest_fragment(backend, site, fid, data)
+
+    _api(settings, upload)
 
 
 def _delete(settings, site: str, fid: str) -> None:
-    async def run() -> None:
-        backend = await Backend.connect(settings)
-        try:
-            await delete_fragment(backend, site, fid)
-        finally:
-            await backend.aclose()
-
-    asyncio.run(run())
+    _api(settings, lambda backend: delete_fragment(backend, site, fid))
 
 
 def _consumer(settings, client, raw) -> Consumer:
@@ -154,6 +161,7 @@ def test_layout_past_its_deadline_times_out(setup, scene: SyntheticScene) -> Non
 def test_older_result_never_overwrites_a_newer_one(setup) -> None:
     settings, client, raw = setup
     ctx = _ctx(settings, client, raw)
+    client.hset(KEYS.site("site"), "created_at", "1.0")
     assert store_result(ctx, "site", 5, ResultModel(status="closed"))
     assert not store_result(ctx, "site", 4, ResultModel(status="open"))
     assert ResultModel.model_validate_json(client.get(KEYS.result("site"))).status == "closed"
@@ -190,3 +198,58 @@ def test_deleting_every_fragment_clears_the_result(setup, scene: SyntheticScene)
     _run_all(consumer)
     assert not client.exists(KEYS.result("site"))
     assert client.hget(KEYS.site("site"), "placement_state") == "idle"
+
+
+def _loop_order(result: ResultModel) -> list[str]:
+    placed = [f for f in result.fragments if f.placed and f.loop_index is not None]
+    return [f.id for f in sorted(placed, key=lambda f: f.loop_index or 0)]
+
+
+def test_placement_reads_the_sites_hints(setup, scene: SyntheticScene) -> None:
+    settings, client, raw = setup
+    _upload(settings, "site", {f.id: encode_ply(f.points) for f in scene.fragments})
+    consumer = _consumer(settings, client, raw)
+    _run_all(consumer)
+    plain = ResultModel.model_validate_json(client.get(KEYS.result("site")))
+    truth = _loop_order(plain)
+    assert plain.status == "closed" and len(truth) == 3
+    # Hints that turn the loop the other way round: new hints place the site again, and the
+    # placement either follows them or reports them as contradicted by the scans.
+    wrong = [truth[0], truth[2], truth[1]]
+    _api(settings, lambda backend: replace_hints(backend, "site", HintsModel(order=wrong)))
+    assert _run_all(consumer) == 1
+    hinted = ResultModel.model_validate_json(client.get(KEYS.result("site")))
+    assert int(client.hget(KEYS.site("site"), "result_generation")) == len(truth) + 1
+    followed = _loop_order(hinted) == wrong
+    reported = "hint" in json.dumps(hinted.diagnostics)
+    assert followed or reported, (hinted.status, _loop_order(hinted), hinted.diagnostics)
+
+
+def test_queued_jobs_of_a_deleted_site_do_not_bring_it_back(setup, scene: SyntheticScene) -> None:
+    settings, client, raw = setup
+    _upload(settings, "site", {f.id: encode_ply(f.points) for f in scene.fragments[:2]})
+    hints = HintsModel(order=[f.id for f in scene.fragments[:2]])
+    _api(settings, lambda backend: replace_hints(backend, "site", hints))
+    kinds = sorted(decode_job(fields["job"]).kind for _, fields in client.xrange(KEYS.jobs))
+    assert kinds == ["layout", "layout", "placement"]
+    _api(settings, lambda backend: delete_site(backend, "site"))
+    assert _run_all(_consumer(settings, client, raw)) == 3
+    assert client.keys("fpj:site:site*") == []
+    assert client.zscore(KEYS.sites, "site") is None
+
+
+def test_results_go_only_to_the_site_the_job_started_on(setup) -> None:
+    settings, client, raw = setup
+    ctx = _ctx(settings, client, raw)
+    ambiguous = ResultModel(
+        status="ambiguous", confidence=0.55, alternatives=[AlternativeModel(probability=0.4)]
+    )
+    assert not store_result(ctx, "site", 1, ambiguous)  # deleted: nothing comes back
+    assert client.keys("fpj:site:site*") == []
+    client.hset(KEYS.site("site"), "created_at", "2.0")  # deleted and created again since
+    assert not store_result(ctx, "site", 1, ambiguous, site_created="1.0")
+    assert not client.exists(KEYS.result("site"))
+    assert store_result(ctx, "site", 1, ambiguous, site_created="2.0")
+    site = client.hgetall(KEYS.site("site"))
+    assert (site["result_status"], site["loop_closed"]) == ("ambiguous", "1")
+    assert (float(site["result_confidence"]), site["result_alternatives"]) == (0.55, "1")

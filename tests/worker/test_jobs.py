@@ -22,6 +22,8 @@ KEYS = Keys("fpj")
 def client(any_redis: str):
     c = redis.Redis.from_url(any_redis, decode_responses=True)
     ensure_group(c, KEYS)
+    for site in ("s1", "a", "b"):  # a site exists from its first upload on
+        c.hset(KEYS.site(site), "created_at", "1.0")
     yield c
     c.close()
 
@@ -72,6 +74,13 @@ def test_finish_leaves_a_newer_owner_alone(client: Any) -> None:
     stale = PlacementJob(site_id="s1")
     assert finish_placement(client, KEYS, settings, stale, 0) is False
     assert client.get(KEYS.placement_flag("s1")) == "someone-else"
+
+
+def test_no_placement_for_a_site_that_does_not_exist(client: Any) -> None:
+    # E.g. deleted while a fragment delete or hints were on their way: nothing comes back.
+    assert request_placement(client, KEYS, make_settings(None), "gone") == 0
+    assert _jobs(client) == []
+    assert client.keys("fpj:site:gone*") == []
 
 
 def test_sites_are_coalesced_separately(client: Any) -> None:
