@@ -1,4 +1,5 @@
-"""Dependencies of the routes, as ``Annotated`` aliases (ids, the backend, auth, sites)."""
+"""Dependencies of the routes, as ``Annotated`` aliases (ids, the backend, auth, sites,
+hints)."""
 
 from __future__ import annotations
 
@@ -9,13 +10,22 @@ from fastapi import Depends, Path, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
 from api.backend import Backend
-from api.errors import ForbiddenError, SiteNotFoundError, UnauthorizedError, check_id
+from api.errors import (
+    ForbiddenError,
+    HintsNotFoundError,
+    SiteNotFoundError,
+    UnauthorizedError,
+    check_id,
+)
+from api.hints import load_hints
 from api.store import site_exists
+from schemas.hints import HintsModel
 
 __all__ = [
     "BackendDep",
     "ExistingSite",
     "FragmentId",
+    "SiteHints",
     "SiteId",
     "get_backend",
     "require_token",
@@ -53,6 +63,16 @@ async def _existing_site(site_id: SiteId, backend: BackendDep) -> str:
 
 
 ExistingSite = Annotated[str, Depends(_existing_site)]
+
+
+async def _site_hints(site_id: ExistingSite, backend: BackendDep) -> HintsModel:
+    hints = await load_hints(backend, site_id)
+    if hints is None:
+        raise HintsNotFoundError(f"site {site_id!r} has no hints")
+    return hints
+
+
+SiteHints = Annotated[HintsModel, Depends(_site_hints)]
 
 _bearer = HTTPBearer(auto_error=False, description="one of the tokens of FPJ_TOKENS")
 

@@ -3,6 +3,7 @@
 The stream starts with ``retry``, an ``event: status`` (the SiteStatus) and, if the site has
 been placed, an ``event: result``; then every SiteEvent published by workers and the API
 (``fragment``, ``placement``, ``result``), and a comment line when idle so proxies keep it open.
+It ends after a ``site`` event (the site was deleted).
 """
 
 from __future__ import annotations
@@ -51,7 +52,10 @@ async def site_event_stream(backend: Backend, site_id: str) -> AsyncIterator[str
                 yield ": keepalive\n\n"
                 continue
             data = str(message["data"])
-            yield format_sse(str(json.loads(data).get("type", "message")), data)
+            kind = str(json.loads(data).get("type", "message"))
+            yield format_sse(kind, data)
+            if kind == "site":  # deleted: nothing more will come
+                return
     finally:
         with anyio.CancelScope(shield=True):
             await pubsub.aclose()  # type: ignore[no-untyped-call]

@@ -10,16 +10,18 @@ from fastapi import Depends, FastAPI
 from api.backend import Backend
 from api.deps import require_token
 from api.errors import install_error_handlers
-from api.routers import events, fragments, health, metrics, sites
+from api.routers import events, fragments, health, hints, metrics, sites
 from api.zenoh import zenoh_front_end
 from schemas.settings import Settings, get_settings
 
 __all__ = ["create_app"]
 
 DESCRIPTION = """\
-Upload partial indoor scans (PLY or PCD fragments) of a site; the service estimates each
-fragment's wall layout, assembles the layouts into one closed floorplan loop and returns
-per-fragment poses and the floorplan (contract v1, sections 3 and 4).
+Upload partial indoor scans (PLY or PCD fragments) of a site, and optionally what the fleet
+already knows (hints: prior poses, neighbours, order); the service estimates each fragment's
+wall layout, assembles the layouts into one closed floorplan loop and returns per-fragment
+poses, the floorplan, its status (closed, ambiguous, open, failed), a confidence and the
+runners-up (contract v2, sections 2 to 4).
 
 Every error answers `{"error": {"code": ..., "message": ...}}`. With `FPJ_TOKENS` set, every
 route but `/healthz` and `/readyz` needs `Authorization: Bearer <token>`.
@@ -52,5 +54,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(metrics.router, dependencies=auth)
     app.include_router(sites.router, dependencies=auth)
     app.include_router(fragments.router, dependencies=auth)
+    app.include_router(hints.router, dependencies=auth)
     app.include_router(events.router, dependencies=auth)
     return app

@@ -99,6 +99,48 @@ def ply_bytes(n: int = 500, seed: int = 0) -> bytes:
     return encode_ply(random_cloud(n, seed))
 
 
+def redis_snapshot(client: Any) -> dict[str, Any]:
+    """Everything stored (a client with string replies), comparable before and after."""
+    state: dict[str, Any] = {}
+    for key in sorted(client.scan_iter()):
+        kind = client.type(key)
+        if kind == "hash":
+            state[key] = client.hgetall(key)
+        elif kind == "zset":
+            state[key] = client.zrange(key, 0, -1, withscores=True)
+        elif kind == "stream":
+            state[key] = [entry_id for entry_id, _ in client.xrange(key)]
+        elif kind == "string":
+            state[key] = client.strlen(key)
+    return state
+
+
+SiteEvents = list[tuple[str, dict[str, Any]]]
+
+
+def read_events(
+    base_url: str,
+    site_id: str,
+    out: SiteEvents,
+    until: Callable[[str, dict[str, Any]], bool] | None = None,
+    timeout: float = 60,
+) -> None:
+    """Append the site's server-sent events to ``out`` as ``(event, data)`` until
+    ``until(event, data)`` holds or the server ends the stream (run it in a thread)."""
+    with (
+        httpx.Client(base_url=base_url, timeout=timeout) as http,
+        http.stream("GET", f"/v1/sites/{site_id}/events") as stream,
+    ):
+        kind = ""
+        for line in stream.iter_lines():
+            if line.startswith("event: "):
+                kind = line[7:]
+            elif line.startswith("data: "):
+                out.append((kind, json.loads(line[6:])))
+                if until is not None and until(*out[-1]):
+                    return
+
+
 # ---------------------------------------------------------------- Redis servers
 
 

@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 from fastapi import APIRouter, Request, Response
 from fastapi.responses import JSONResponse
 
-from api.body import read_limited
+from api.body import openapi_body, read_limited
 from api.deps import BackendDep, ExistingSite, FragmentId, SiteId
 from api.errors import error_responses
 from api.ingest import ingest_fragment
@@ -18,13 +16,11 @@ __all__ = ["router"]
 
 router = APIRouter(prefix="/v1/sites/{site_id}/fragments", tags=["fragments"])
 
-_BODY: dict[str, Any] = {
-    "requestBody": {
-        "required": True,
-        "description": "the fragment file's bytes (PLY or PCD)",
-        "content": {"application/octet-stream": {"schema": {"type": "string", "format": "binary"}}},
-    }
-}
+_BODY = openapi_body(
+    "the fragment file's bytes (PLY or PCD)",
+    "application/octet-stream",
+    {"type": "string", "format": "binary"},
+)
 
 
 @router.put(

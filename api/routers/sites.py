@@ -1,4 +1,5 @@
-"""``/v1/sites``: the list, a site's status, its result and a picture of its floorplan."""
+"""``/v1/sites``: the list, a site's status and deletion, its result and a picture of its
+floorplan."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from fastapi.responses import JSONResponse
 from api.deps import BackendDep, ExistingSite
 from api.errors import error_responses
 from api.floorplan_svg import render_floorplan_svg
-from api.store import list_sites, load_result, load_site_status
+from api.store import delete_site, list_sites, load_result, load_site_status
 from schemas.result import ResultModel
 from schemas.service import PendingReply, SiteList, SiteStatus
 
@@ -45,12 +46,24 @@ async def get_site(site_id: ExistingSite, backend: BackendDep) -> SiteStatus:
     return await load_site_status(backend, site_id)
 
 
+@router.delete(
+    "/{site_id}",
+    status_code=204,
+    summary="Delete a site and everything stored for it (contract section 4)",
+    responses=error_responses(400, 401, 403, 404, 503),
+)
+async def remove_site(site_id: ExistingSite, backend: BackendDep) -> Response:
+    """Fragments, layouts, result, hints and status go; queued jobs of the site do nothing."""
+    await delete_site(backend, site_id)
+    return Response(status_code=204)
+
+
 @router.get(
     "/{site_id}/result",
     summary="Result JSON of the newest global placement (contract section 3)",
     response_model=ResultModel,
     responses={
-        200: {"description": "the result (status closed, open or failed)"},
+        200: {"description": "the result (status closed, ambiguous, open or failed)"},
         **_PENDING,
         **error_responses(400, 401, 403, 404, 503),
     },

@@ -10,26 +10,11 @@ import pytest
 
 from services.point_io import encode_pcd, encode_ply
 from tests.service_fixtures import ApiServer, make_settings, ply_bytes
+from tests.service_fixtures import redis_snapshot as snapshot
 
 pytestmark = pytest.mark.timeout(60)
 
 SITE = "/v1/sites/site-1"
-
-
-def snapshot(client: Any) -> dict[str, Any]:
-    """Everything stored, comparable before and after a request."""
-    state: dict[str, Any] = {}
-    for key in sorted(client.scan_iter()):
-        kind = client.type(key)
-        if kind == "hash":
-            state[key] = client.hgetall(key)
-        elif kind == "zset":
-            state[key] = client.zrange(key, 0, -1, withscores=True)
-        elif kind == "stream":
-            state[key] = [entry_id for entry_id, _ in client.xrange(key)]
-        elif kind == "string":
-            state[key] = client.strlen(key)
-    return state
 
 
 @pytest.fixture

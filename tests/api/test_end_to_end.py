@@ -4,12 +4,10 @@ closed loops with correct poses, sites that do not mix, events, pictures, deleti
 from __future__ import annotations
 
 import concurrent.futures
-import json
 import threading
 from collections.abc import Iterator
 from typing import Any
 
-import httpx
 import numpy as np
 import pytest
 
@@ -19,8 +17,10 @@ from services.point_io import encode_ply
 from services.synthetic import SceneSpec, SyntheticScene, generate_scene
 from tests.service_fixtures import (
     ApiServer,
+    SiteEvents,
     Workers,
     make_settings,
+    read_events,
     wait_result,
     wait_until,
     wait_workers_alive,
@@ -90,22 +90,13 @@ def _in_process(scene: SyntheticScene, order: list[str]) -> dict[str, Any]:
     return place_site(layouts, params).model_dump(mode="json")
 
 
-def _events(
-    server: ApiServer, site: str, out: list[tuple[str, dict[str, Any]]], done: threading.Event
-) -> None:
-    with (
-        httpx.Client(base_url=server.url, timeout=60) as http,
-        http.stream("GET", f"/v1/sites/{site}/events") as stream,
-    ):
-        kind = ""
-        for line in stream.iter_lines():
-            if line.startswith("event: "):
-                kind = line[7:]
-            elif line.startswith("data: "):
-                out.append((kind, json.loads(line[6:])))
-                if kind == "result" and out[-1][1]["data"]["status"] == "closed":
-                    done.set()
-                    return
+def _events(server: ApiServer, site: str, out: SiteEvents, done: threading.Event) -> None:
+    read_events(server.url, site, out, lambda kind, e: kind == "result" and _closed(e))
+    done.set()
+
+
+def _closed(event: dict[str, Any]) -> bool:
+    return bool(event["data"]["status"] == "closed")
 
 
 def test_concurrent_uploads_close_one_site(server: ApiServer, scenes, redis_client) -> None:
