@@ -1,5 +1,6 @@
 """An SVG picture of a placement result: rooms, each fragment's walls and origin, in the site
-frame seen from above (x to the right, y up)."""
+frame seen from above (x to the right, y up); the caption gives the status and confidence,
+and an ambiguous result also shows its most probable runner-up's floorplan, dashed."""
 
 from __future__ import annotations
 
@@ -7,13 +8,23 @@ from html import escape
 
 import numpy as np
 
-from schemas.result import FragmentResultModel, ResultModel
+from schemas.result import FragmentResultModel, ResultModel, RoomModel
 from services.types import FloatArray
 
 __all__ = ["render_floorplan_svg"]
 
 _COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#17becf")
-_STATUS_COLORS = {"closed": "#2ca02c", "open": "#ff7f0e", "failed": "#d62728"}
+_STATUS_COLORS = {
+    "closed": "#2ca02c",
+    "ambiguous": "#b8860b",
+    "open": "#ff7f0e",
+    "failed": "#d62728",
+}
+_ALTERNATIVE_STYLE = 'fill="none" stroke="#555" stroke-width="2" stroke-dasharray="8 6"'
+
+
+def _polygons(rooms: list[RoomModel]) -> list[FloatArray]:
+    return [np.asarray(r.polygon, dtype=np.float64).reshape(-1, 2) for r in rooms]
 
 
 def _walls_site(fragment: FragmentResultModel) -> FloatArray:
@@ -70,12 +81,16 @@ def render_floorplan_svg(
     >>> render_floorplan_svg(ResultModel(status="failed")).startswith("<svg")
     True
     """
-    rooms = [np.asarray(r.polygon, dtype=np.float64).reshape(-1, 2) for r in result.floorplan.rooms]
+    rooms = _polygons(result.floorplan.rooms)
+    ambiguous = result.status == "ambiguous" and result.alternatives
+    runner_up = result.alternatives[0] if ambiguous else None
+    other_rooms = _polygons(runner_up.floorplan.rooms) if runner_up is not None else []
     walls = [_walls_site(f) for f in result.fragments]
     origins = np.array(
         [np.asarray(f.pose)[:2, 3] for f in result.fragments if f.placed and f.pose is not None]
     ).reshape(-1, 2)
-    view = _View(np.vstack([*rooms, *walls, origins, np.zeros((0, 2))]), size, margin)
+    everything = [*rooms, *other_rooms, *walls, origins, np.zeros((0, 2))]
+    view = _View(np.vstack(everything), size, margin)
     parts = [
         f'<svg xmlns="http://www.w3.org/2000/svg" width="{size}" height="{size}" '
         f'viewBox="0 0 {size} {size}" font-family="sans-serif" font-size="12">',
@@ -87,6 +102,9 @@ def render_floorplan_svg(
                 f'<polygon points="{view.path(room)}" fill="#eeeeee" stroke="#333" '
                 'stroke-width="2"/>'
             )
+    for room in other_rooms:
+        if len(room) >= 3:
+            parts.append(f'<polygon points="{view.path(room)}" {_ALTERNATIVE_STYLE}/>')
     for index, (fragment, wall) in enumerate(zip(result.fragments, walls, strict=True)):
         color = _COLORS[index % len(_COLORS)]
         label = escape(fragment.id)
@@ -102,7 +120,13 @@ def render_floorplan_svg(
     unplaced = [escape(f.id) for f in result.fragments if not f.placed]
     status_color = _STATUS_COLORS.get(result.status, "#333")
     caption = f"{escape(title)} status: {escape(result.status)}".strip()
+    caption += f", confidence {result.confidence:.2f}"
+    if result.alternatives:
+        caption += f", {len(result.alternatives)} alternative(s)"
     parts.append(f'<text x="10" y="20" font-size="16" fill="{status_color}">{caption}</text>')
+    if other_rooms and runner_up is not None:
+        legend = f"dashed: the runner-up floorplan (probability {runner_up.probability:.2f})"
+        parts.append(f'<text x="10" y="38" fill="#555">{legend}</text>')
     if unplaced:
         parts.append(f'<text x="10" y="{size - 10}">not placed: {", ".join(unplaced)}</text>')
     parts.append("</svg>")

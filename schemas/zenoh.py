@@ -6,13 +6,16 @@ fragment payload (the file's bytes) and the ROS 2 topics (CDR, as rmw_zenoh send
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Literal, get_args
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
 from schemas.ids import is_valid_id
 
-__all__ = ["PoseUpdate", "RobotTag", "SenderRecord", "ServiceInfo"]
+__all__ = ["POSE_STATUSES", "PoseStatus", "PoseUpdate", "RobotTag", "SenderRecord", "ServiceInfo"]
+
+PoseStatus = Literal["closed", "ambiguous", "open"]  # result statuses whose poses go out
+POSE_STATUSES: tuple[str, ...] = get_args(PoseStatus)
 
 
 class _Wire(BaseModel):
@@ -26,11 +29,15 @@ def _valid_id(value: str | None) -> str | None:
 
 
 class PoseUpdate(_Wire):
-    """One fragment's pose, published on ``fpj/sites/{site_id}/poses/{fragment_id}``."""
+    """One fragment's pose, published on ``fpj/sites/{site_id}/poses/{fragment_id}``
+    (contract section 5, plus the result's confidence)."""
 
     fragment_id: str
     pose: list[list[float]] = Field(description="4x4 row-major, fragment-local to site frame")
-    status: Literal["closed", "open"] = Field(description="status of the site's result")
+    status: PoseStatus = Field(description="status of the site's result")
+    confidence: float = Field(
+        0.0, ge=0.0, le=1.0, description="the result's confidence in its main assembly"
+    )
 
 
 class ServiceInfo(_Wire):

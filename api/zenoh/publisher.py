@@ -3,7 +3,7 @@
 After each placement a worker publishes ``{"version", "site_id", "generation", "result"}`` on
 ``P:results`` (:func:`worker.updates.store_result`). For each such message this publishes the
 result JSON on ``fpj/sites/{site}/result``, each placed fragment's :class:`PoseUpdate` on
-``fpj/sites/{site}/poses/{fragment}`` (when the status is closed or open) and, if configured,
+``fpj/sites/{site}/poses/{fragment}`` (status closed, ambiguous or open) and, if configured,
 the PoseStamped messages of :class:`api.zenoh.ros_bridge.RosBridge`. Puts block under
 congestion instead of dropping, off the event loop.
 
@@ -25,7 +25,7 @@ from api.backend import Backend
 from api.zenoh.keys import ZenohKeys
 from api.zenoh.ros_bridge import RosBridge
 from schemas.result import ResultModel
-from schemas.zenoh import PoseUpdate
+from schemas.zenoh import POSE_STATUSES, PoseUpdate
 from worker.connection import REDIS_DOWN
 
 __all__ = ["ResultPublisher", "pose_updates"]
@@ -34,11 +34,18 @@ log = logging.getLogger(__name__)
 
 
 def pose_updates(result: ResultModel) -> list[PoseUpdate]:
-    """The pose messages of a result: placed fragments of a closed or open result."""
-    if result.status not in ("closed", "open"):
+    """The pose messages of a result: its placed fragments, with its status and confidence
+    (none for a failed result).
+
+    >>> pose_updates(ResultModel(status="failed"))
+    []
+    """
+    if result.status not in POSE_STATUSES:
         return []
     return [
-        PoseUpdate(fragment_id=f.id, pose=f.pose, status=result.status)
+        PoseUpdate(
+            fragment_id=f.id, pose=f.pose, status=result.status, confidence=result.confidence
+        )
         for f in result.fragments
         if f.placed and f.pose is not None
     ]

@@ -46,7 +46,7 @@ from api.zenoh.ros2 import (
     type_hash,
 )
 from schemas.result import ResultModel
-from schemas.zenoh import SenderRecord
+from schemas.zenoh import POSE_STATUSES, SenderRecord
 
 __all__ = ["RosBridge", "cloud_fragment_id", "topic_robot"]
 
@@ -165,8 +165,8 @@ class RosBridge:
         )
 
     async def publish_poses(self, site_id: str, result: ResultModel) -> None:
-        """Publish a PoseStamped per placed fragment of a closed or open result."""
-        if self._publisher is None or result.status not in ("closed", "open"):
+        """Publish a PoseStamped per placed fragment of a closed, ambiguous or open result."""
+        if self._publisher is None or result.status not in POSE_STATUSES:
             return
         placed = [f for f in result.fragments if f.placed and f.pose is not None]
         if not placed:

@@ -74,3 +74,36 @@ def test_full_result() -> None:
 def test_degenerate_results(result: ResultModel) -> None:
     root = ET.fromstring(render_floorplan_svg(result))
     assert root.tag == f"{NS}svg"
+
+
+def test_ambiguous_result_shows_confidence_and_the_runner_up_dashed() -> None:
+    square = [[0, 0], [4, 0], [4, 3], [0, 3]]
+    swapped = [[0, 0], [3, 0], [3, 4], [0, 4]]
+    result = ResultModel.model_validate(
+        {
+            "status": "ambiguous",
+            "confidence": 0.6,
+            "fragments": [{"id": "a", "placed": True, "pose": _pose(0, 0, 0)}],
+            "floorplan": {"rooms": [{"id": "room_0", "polygon": square}]},
+            "alternatives": [
+                {
+                    "probability": 0.35,
+                    "fragments": [{"id": "a", "pose": _pose(90, 0, 0)}],
+                    "floorplan": {"rooms": [{"id": "room_0", "polygon": swapped}]},
+                }
+            ],
+        }
+    )
+    root = ET.fromstring(render_floorplan_svg(result, title="s"))
+    polygons = root.findall(f"{NS}polygon")
+    assert len(polygons) == 2
+    dashed = [p for p in polygons if p.get("stroke-dasharray")]
+    assert len(dashed) == 1 and dashed[0].get("fill") == "none"
+    texts = " ".join(t.text or "" for t in root.findall(f"{NS}text"))
+    assert "ambiguous" in texts and "confidence 0.60" in texts and "1 alternative" in texts
+    assert "probability 0.35" in texts
+    # A closed result: the confidence too, and no dashed runner-up.
+    closed = result.model_copy(update={"status": "closed", "confidence": 0.97})
+    root = ET.fromstring(render_floorplan_svg(closed))
+    assert not [p for p in root.findall(f"{NS}polygon") if p.get("stroke-dasharray")]
+    assert "confidence 0.97" in " ".join(t.text or "" for t in root.findall(f"{NS}text"))

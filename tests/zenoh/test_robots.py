@@ -27,6 +27,7 @@ def _closed_poses(lines: list[str], ids: set[str]) -> dict[str, Any] | None:
     poses = {}
     for line in lines:
         update = json.loads(line)
+        assert 0.0 <= update["confidence"] <= 1.0, update  # each update says how sure it is
         if update["status"] == "closed":
             poses[update["fragment_id"]] = update["pose"]
     return poses if set(poses) >= ids else None
