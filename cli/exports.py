@@ -64,17 +64,21 @@ class ExportTargets:
     model: Path | None = None
     picture: Path | None = None
 
+    def requested(self) -> dict[str, Path | None]:
+        """Option name -> path (None when not asked for)."""
+        return {"--cloud": self.cloud, "--model": self.model, "--picture": self.picture}
+
     def problems(self) -> list[str]:
         """Options whose file suffix is not supported (empty when all are fine)."""
-        checks = [
-            ("--cloud", self.cloud, (".ply",)),
-            ("--model", self.model, _MODEL_SUFFIXES),
-            ("--picture", self.picture, _PICTURE_SUFFIXES),
-        ]
+        suffixes = {
+            "--cloud": (".ply",),
+            "--model": _MODEL_SUFFIXES,
+            "--picture": _PICTURE_SUFFIXES,
+        }
         return [
-            f"{option} {path}: must end in {' or '.join(suffixes)}"
-            for option, path, suffixes in checks
-            if path is not None and path.suffix.lower() not in suffixes
+            f"{option} {path}: must end in {' or '.join(suffixes[option])}"
+            for option, path in self.requested().items()
+            if path is not None and path.suffix.lower() not in suffixes[option]
         ]
 
 

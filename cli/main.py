@@ -51,13 +51,27 @@ def align(
             "slow (seconds per pair) and may merge wrongly on repetitive rooms",
         ),
     ] = False,
+    hints: Annotated[
+        Path | None,
+        typer.Option(
+            "--hints",
+            help="hints JSON (contract section 2): prior poses with standard deviations, "
+            "known neighbour pairs, known order; checked before anything runs",
+        ),
+    ] = None,
 ) -> None:
-    """Align fragments into one room: poses, floorplan (result JSON of the contract)."""
+    """Align fragments into one room: poses, floorplan (result JSON of the contract).
+
+    Exit code 0 when a result was written (whatever its status), 2 when no fragment is
+    usable or an option is wrong (hints file, output path), 1 for an internal failure. A
+    summary (fragments used, status, confidence, outputs) goes to stderr.
+    """
     from cli.exports import ExportTargets
     from cli.pipeline import run_align
 
     targets = ExportTargets(cloud, model, picture)
-    raise typer.Exit(run_align(paths, output, exports=targets, premerge=premerge))
+    code = run_align(paths, output, exports=targets, premerge=premerge, hints_path=hints)
+    raise typer.Exit(code)
 
 
 @app.command()

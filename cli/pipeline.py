@@ -18,6 +18,8 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from cli.exports import ExportTargets, write_exports
+from cli.preflight import OptionFileError, output_problems, read_option_file
+from schemas.hints import HintsModel
 from schemas.params import PipelineParams
 from schemas.result import ResultModel
 from services.errors import JigsawError
@@ -139,8 +141,11 @@ class AlignRun:
     seconds: dict[str, float]
 
 
-def align_fragments(clouds: dict[str, FloatArray], params: PipelineParams) -> AlignRun:
-    """Local layouts of all clouds, then the global placement; timed per stage.
+def align_fragments(
+    clouds: dict[str, FloatArray], params: PipelineParams, hints: HintsModel | None = None
+) -> AlignRun:
+    """Local layouts of all clouds, then the global placement (with ``hints``, if any);
+    timed per stage.
 
     The stages of :func:`services.pipeline.align_clouds` without the pre-merge, keeping the
     layouts (for pictures) and the time of each stage.
@@ -153,7 +158,7 @@ def align_fragments(clouds: dict[str, FloatArray], params: PipelineParams) -> Al
     def mark(stage: str, _fraction: float) -> None:
         marks.setdefault(stage, perf_counter())
 
-    result = place_site(layouts, params, mark)
+    result = place_site(layouts, params, mark, hints=hints)
     end = perf_counter()
     seconds = {"local_layout": middle - start, "global": end - middle}
     if "placement" in marks and "refinement" in marks:
@@ -162,19 +167,59 @@ def align_fragments(clouds: dict[str, FloatArray], params: PipelineParams) -> Al
     return AlignRun(layouts, result, seconds)
 
 
+def _preflight(
+    output: Path | None, exports: ExportTargets, hints_path: Path | None
+) -> tuple[list[str], HintsModel | None]:
+    """Problems of the options (one line each), and the hints; nothing has run yet."""
+    problems = [f"error: {p}" for p in exports.problems()]
+    outputs = {"-o": output, **exports.requested()}
+    problems += [f"error: {p}" for p in output_problems(outputs)]
+    hints = None
+    if hints_path is not None:
+        try:
+            hints = read_option_file(hints_path, HintsModel)
+        except OptionFileError as exc:
+            problems.append(exc.message)
+    return problems, hints
+
+
+def _summary(
+    result: ResultModel, skipped: int, output: Path | None, exports: ExportTargets, notes: list[str]
+) -> str:
+    """Two lines for stderr after a run: what was used and found, and where it went
+    (``notes``: the exports that were not written, and why)."""
+    placed = sum(f.placed for f in result.fragments)
+    used = f"{len(result.fragments)} fragment(s) used, {skipped} skipped, {placed} placed"
+    found = f"status {result.status}, confidence {result.confidence:.2f}"
+    found += f", {len(result.alternatives)} alternative(s)"
+    written = [f"result {output or 'stdout'}"]
+    for option, path in exports.requested().items():
+        if path is not None and not any(note.startswith(f"{path}: ") for note in notes):
+            written.append(f"{option.removeprefix('--')} {path}")
+    return f"{used}; {found}\nwritten: {', '.join(written)}"
+
+
 def run_align(
     paths: list[Path],
     output: Path | None,
     params: PipelineParams | None = None,
     exports: ExportTargets | None = None,
     premerge: bool = False,
+    hints_path: Path | None = None,
 ) -> int:
     """``jigsaw align``: the contract's result JSON, plus optional exports. Returns the exit
-    code. With ``premerge``, overlapping fragments are first merged by FPFH registration."""
+    code. With ``premerge``, overlapping fragments are first merged by FPFH registration;
+    ``hints_path``: a hints JSON file (contract section 2).
+
+    The options (hints file, output paths) are checked before any fragment is read: a
+    problem is exit code 2 with one line on stderr each. After a run, a short summary goes
+    to stderr (the result JSON may be on stdout).
+    """
     params = params or PipelineParams()
     exports = exports or ExportTargets()
-    if problems := exports.problems():
-        print("\n".join(f"error: {p}" for p in problems), file=sys.stderr)
+    problems, hints = _preflight(output, exports, hints_path)
+    if problems:
+        print("\n".join(problems), file=sys.stderr)
         return EXIT_NO_INPUT
     clouds = read_fragments(paths, params)
     if not clouds:
@@ -182,18 +227,20 @@ def run_align(
         return EXIT_NO_INPUT
     try:
         if premerge:
-            result = align_clouds(clouds, params, premerge_overlapping=True)
+            result = align_clouds(clouds, params, premerge_overlapping=True, hints=hints)
         else:
-            result = align_fragments(clouds, params).result
+            result = align_fragments(clouds, params, hints).result
     except Exception as exc:  # an internal failure must still end with a message and code 1
         print(f"internal error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return EXIT_INTERNAL
-    _write_json(result.model_dump(mode="json"), output)
     try:
+        _write_json(result.model_dump(mode="json"), output)
         notes = write_exports(exports, clouds, result)
     except OSError as exc:
         print(f"{exc.filename or 'export'}: cannot write: {exc.strerror or exc}", file=sys.stderr)
         return EXIT_INTERNAL
     for note in notes:
         print(note, file=sys.stderr)
+    skipped = len(collect_paths(paths)) - len(clouds)
+    print(_summary(result, skipped, output, exports, notes), file=sys.stderr)
     return EXIT_OK
