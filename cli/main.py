@@ -189,14 +189,33 @@ def send(
     prefix: PrefixOpt = "fpj",
     token: TokenOpt = None,
     timeout: TimeoutOpt = 60.0,
+    prior: Annotated[
+        Path | None,
+        typer.Option(
+            "--prior",
+            help='prior of the (one) fragment\'s pose, JSON {"pose", "sigma_xy", '
+            '"sigma_yaw_deg"}: its entry of the site\'s hints',
+        ),
+    ] = None,
 ) -> None:
     """Send fragments to the service over zenoh (one query each); print each reply."""
     import sys
 
     from api.zenoh.client import send_fragments
+    from cli.preflight import OptionFileError, read_option_file
+    from schemas.hints import FragmentPrior
 
+    known = None
+    if prior is not None:
+        if len(files) != 1:
+            raise typer.BadParameter("a prior belongs to one fragment: give one file")
+        try:
+            known = read_option_file(prior, FragmentPrior)
+        except OptionFileError as exc:
+            typer.echo(exc.message, err=True)
+            raise typer.Exit(2) from exc
     options = _robot_options(connect, mode, scout, prefix, robot, token, timeout)
-    raise typer.Exit(send_fragments(options, site, files, sys.stdout, sys.stderr))
+    raise typer.Exit(send_fragments(options, site, files, sys.stdout, sys.stderr, prior=known))
 
 
 @app.command()

@@ -15,10 +15,15 @@ Robots:
   declare the liveliness token ``fpj/robots/{robot_id}`` while connected: the site status
   (``GET /v1/sites/{site}``, field ``robots``) lists connected robots and the fragments each
   sent. With ``FPJ_TOKENS`` set the attachment must also carry ``"token"``;
+- may add what they know of the fragment's pose to the attachment,
+  ``"prior": {"pose", "sigma_xy", "sigma_yaw_deg"}``: it becomes the fragment's entry of the
+  site's hints (``GET /v1/sites/{site}/hints``) and the site is placed again; an invalid
+  prior gets the error ``invalid_prior`` and nothing is stored;
 - should query ``fpj/service`` first: a message larger than ``max_message_bytes`` is dropped
   by zenoh without any reply, one over ``max_upload_bytes`` gets ``fragment_too_large``;
-- subscribe to ``fpj/sites/{site}/poses/*`` and ``fpj/sites/{site}/result``, and query the
-  latter for the latest result when they join late.
+- subscribe to ``fpj/sites/{site}/poses/*`` (PoseUpdate: pose, the result's status and its
+  confidence) and ``fpj/sites/{site}/result``, and query the latter for the latest result
+  when they join late.
 
 ROS 2 robots on rmw_zenoh need none of this: see :mod:`api.zenoh.ros_bridge`.
 """

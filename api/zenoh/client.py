@@ -29,6 +29,7 @@ from api.errors import error_body
 from api.zenoh.config import Mode, ZenohOptions, build_config
 from api.zenoh.keys import ZenohKeys
 from api.zenoh.publisher import pose_updates
+from schemas.hints import FragmentPrior
 from schemas.result import ResultModel
 from schemas.zenoh import ServiceInfo
 from services.errors import FragmentTooLargeError
@@ -52,9 +53,13 @@ class RobotOptions:
     def keys(self) -> ZenohKeys:
         return ZenohKeys(self.prefix)
 
-    def attachment(self) -> bytes | None:
-        """The robot tag attachment (UTF-8 JSON), if there is anything to tag."""
-        tag = {k: v for k, v in (("robot_id", self.robot_id), ("token", self.token)) if v}
+    def attachment(self, prior: FragmentPrior | None = None) -> bytes | None:
+        """The attachment (UTF-8 JSON): robot tag and the fragment's prior, if any."""
+        tag: dict[str, Any] = {
+            k: v for k, v in (("robot_id", self.robot_id), ("token", self.token)) if v
+        }
+        if prior is not None:
+            tag["prior"] = prior.model_dump(mode="json")
         return json.dumps(tag).encode() if tag else None
 
 
@@ -153,7 +158,12 @@ def _reply_text(replies: Any, timeout: float) -> tuple[bool, str]:
 
 
 def _send_one(
-    session: zenoh.Session, options: RobotOptions, site_id: str, path: Path, info: ServiceInfo
+    session: zenoh.Session,
+    options: RobotOptions,
+    site_id: str,
+    path: Path,
+    info: ServiceInfo,
+    prior: FragmentPrior | None,
 ) -> tuple[bool, str]:
     data = path.read_bytes()
     if len(data) > info.max_upload_bytes:
@@ -162,16 +172,23 @@ def _send_one(
     replies = session.get(
         options.keys.fragment(site_id, path.stem),
         payload=data,
-        attachment=options.attachment(),
+        attachment=options.attachment(prior),
         timeout=options.timeout,
     )
     return _reply_text(replies, options.timeout)
 
 
 def send_fragments(
-    options: RobotOptions, site_id: str, files: Sequence[Path], out: TextIO, err: TextIO
+    options: RobotOptions,
+    site_id: str,
+    files: Sequence[Path],
+    out: TextIO,
+    err: TextIO,
+    *,
+    prior: FragmentPrior | None = None,
 ) -> int:
     """Send each file as fragment ``{stem}`` of ``site_id`` by query; print each reply.
+    ``prior``: sent in each query's attachment (meant for a single fragment).
 
     Returns
     -------
@@ -186,7 +203,7 @@ def send_fragments(
         failures = 0
         for path in files:
             try:
-                ok, text = _send_one(session, options, site_id, path, info)
+                ok, text = _send_one(session, options, site_id, path, info, prior)
             except OSError as exc:
                 ok, text = False, _error_text("unreadable", str(exc))
             out.write(text + "\n")

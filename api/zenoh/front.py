@@ -5,7 +5,8 @@ stores goes through the same code as HTTP, on the app's event loop:
 
 - ingest queryable and subscriber on ``fpj/sites/*/fragments/*`` ->
   :func:`api.ingest.ingest_fragment`; a query gets the HTTP PUT's JSON, or the HTTP error
-  body as a zenoh error reply;
+  body as a zenoh error reply; an attachment ``prior`` goes into the site's hints
+  (:mod:`api.zenoh.ingest`);
 - result queryable on ``fpj/sites/*/result`` -> the stored result (errors: ``site_not_found``,
   ``result_pending``); a wildcard site (``fpj/sites/*/result``) gets every site's result;
 - ``fpj/service`` -> :class:`schemas.zenoh.ServiceInfo` (limits robots check before sending);
@@ -30,7 +31,7 @@ from api.errors import SiteNotFoundError, check_id
 from api.store import load_result, site_exists
 from api.zenoh.bridge import LoopBridge, error_of, reply_error, reply_json
 from api.zenoh.config import build_config, service_options
-from api.zenoh.ingest import check_token, ingest_with_sender, parse_tag
+from api.zenoh.ingest import attachment_prior, check_token, ingest_with_sender, parse_tag
 from api.zenoh.keys import ZenohKeys
 from api.zenoh.publisher import ResultPublisher
 from api.zenoh.robots import RobotTracker
@@ -180,7 +181,9 @@ class ZenohFront:
                 reply_json(query, key, body)
 
     async def _ingest_query(self, request: Request) -> list[tuple[str, str]]:
-        reply = await self._ingest(request.key, request.payload, request.tag())
+        reply = await self._ingest(
+            request.key, request.payload, request.attachment, request.parameters
+        )
         return [(request.key, reply.model_dump_json())]
 
     async def _result_query(self, request: Request) -> list[tuple[str, str]]:
@@ -200,7 +203,7 @@ class ZenohFront:
         """Ingest a put; puts are stored in the order they arrived (no reply to wait for)."""
         try:
             async with self._put_order:
-                reply = await self._ingest(key, data, parse_tag(attachment))
+                reply = await self._ingest(key, data, attachment)
         except Exception as exc:  # nobody to answer: log it
             code, message = error_of(exc)
             log.warning("put on %s rejected: %s: %s", key, code, message)
@@ -209,11 +212,20 @@ class ZenohFront:
             return
         log.info("put on %s accepted (%s)", key, "new" if reply.created else "already stored")
 
-    async def _ingest(self, key: str, data: bytes, tag: RobotTag) -> UploadReply:
+    async def _ingest(
+        self,
+        key: str,
+        data: bytes,
+        attachment: bytes | None,
+        parameters: dict[str, str] | None = None,
+    ) -> UploadReply:
+        """Tag and token first, then the prior (refused before anything is stored)."""
+        tag = parse_tag(attachment, parameters)
         check_token(self.settings.tokens, tag)
+        prior = attachment_prior(attachment)
         site_id, fragment_id = self.keys.parse_fragment(key) or ("", "")
         sender = SenderRecord(robot_id=tag.robot_id) if tag.robot_id else None
-        return await ingest_with_sender(self.backend, site_id, fragment_id, data, sender)
+        return await ingest_with_sender(self.backend, site_id, fragment_id, data, sender, prior)
 
     # ------------------------------------------------------------ results and info
 
