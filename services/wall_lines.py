@@ -128,7 +128,8 @@ def _offset_peaks(offsets: FloatArray, min_support: float) -> FloatArray:
     smooth = np.convolve(hist, kernel, mode="same")
     order = np.argsort(-smooth)
     peaks: list[float] = []
-    for idx in order[window[order] >= min_support]:
+    # A peak needs points near it, however low the support asked for.
+    for idx in order[window[order] >= max(min_support, 1.0)]:
         position = lo + (idx + 0.5) * _HIST_BIN
         if all(abs(position - p) > _MERGE_DISTANCE for p in peaks):
             peaks.append(position)
@@ -356,6 +357,8 @@ def find_wall_lines(
         for peak in _offset_peaks(wall_points[:, offset_axis], min_support):
             near = np.abs(wall_points[:, offset_axis] - peak) < _LINE_TOLERANCE
             members = wall_points[near]
+            if len(members) == 0:
+                continue  # a peak of the binned histogram can fall between the points
             offset = float(np.median(members[:, offset_axis]))
             lines += _lines_from_peak(axis, offset, members, grid, rule, params)
     return lines + _occluded_links(lines, grid)

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from schemas.params import LayoutParams
+from services.pipeline import estimate_layout
+from services.synthetic import SceneSpec, generate_scene
 from services.wall_lines import _runs, evidence_threshold, find_wall_lines
 
 pytestmark = pytest.mark.timeout(60)
@@ -146,3 +150,12 @@ def test_hidden_back_of_a_shallow_alcove_is_deduced():
     lines = find_wall_lines(points, normals, 0.0, 2.6, LayoutParams())
     deduced = [ln for ln in lines if ln.virtual and ln.axis == 0]
     assert any(abs(ln.offset) < 0.15 for ln in deduced)
+
+
+def test_a_histogram_peak_without_points_near_it_is_skipped():
+    # Regression: a sparse world-preset fragment whose offset histogram peaked between its
+    # points made find_wall_lines take the median of nothing and crash.
+    spec = dataclasses.replace(SceneSpec.world(), n_fragments_range=(9, 12))
+    fragment = next(f for f in generate_scene(spec, 203008).fragments if f.id == "frag_01")
+    layout = estimate_layout(fragment.points)
+    assert layout.ok
