@@ -35,6 +35,7 @@ __all__ = [
     "InvalidHintsError",
     "InvalidIdError",
     "InvalidPriorError",
+    "LayoutNotFoundError",
     "NotFoundError",
     "ServiceError",
     "SiteNotFoundError",
@@ -74,6 +75,12 @@ class FragmentNotFoundError(NotFoundError):
 
 class HintsNotFoundError(NotFoundError):
     code = "hints_not_found"
+
+
+class LayoutNotFoundError(NotFoundError):
+    """The newest result places no fragment: there is no layout model to export."""
+
+    code = "layout_not_found"
 
 
 class InvalidHintsError(ServiceError):
@@ -132,7 +139,7 @@ _DESCRIPTIONS = {
     400: "invalid id (1 to 64 characters of [A-Za-z0-9._-], not . or ..)",
     401: "missing bearer token",
     403: "unknown bearer token",
-    404: "unknown site or fragment, or no hints stored",
+    404: "unknown site or fragment, no hints stored, or nothing placed to export",
     409: "different bytes already stored under this fragment id",
     413: "body too large (bytes or points)",
     415: "not a PLY or PCD file",

@@ -1,15 +1,16 @@
-"""``/v1/sites``: the list, a site's status and deletion, its result and a picture of its
-floorplan."""
+"""``/v1/sites``: the list, a site's status and deletion, its result, a picture of its
+floorplan and its 3D layout model (glTF)."""
 
 from __future__ import annotations
 
+import json
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Query, Response
 from fastapi.responses import JSONResponse
 
 from api.deps import BackendDep, ExistingSite
-from api.errors import error_responses
+from api.errors import LayoutNotFoundError, error_responses
 from api.floorplan_svg import render_floorplan_svg
 from api.store import delete_site, list_sites, load_result, load_site_status
 from schemas.result import ResultModel
@@ -91,3 +92,30 @@ async def get_floorplan_svg(site_id: ExistingSite, backend: BackendDep) -> Respo
         return _pending(site_id)
     svg = render_floorplan_svg(ResultModel.model_validate_json(body), title=site_id)
     return Response(svg, media_type="image/svg+xml")
+
+
+@router.get(
+    "/{site_id}/layout.gltf",
+    summary="3D layout model of the newest result (glTF 2.0, site frame turned y-up)",
+    response_class=Response,
+    responses={
+        200: {"content": {"model/gltf+json": {}}, "description": "glTF 2.0 JSON"},
+        **_PENDING,
+        **error_responses(400, 401, 403, 404, 503),
+    },
+)
+async def get_layout_gltf(site_id: ExistingSite, backend: BackendDep) -> Response:
+    """Walls, floor and ceiling of a closed room; the walls of the placed fragments
+    otherwise (as ``jigsaw align --model x.gltf``). 404 ``layout_not_found`` when the newest
+    result places nothing."""
+    from cli.exports import layout_model, mesh_gltf
+
+    body = await load_result(backend, site_id)
+    if body is None:
+        return _pending(site_id)
+    mesh = layout_model(ResultModel.model_validate_json(body))
+    if mesh is None or len(mesh.triangles) == 0:
+        raise LayoutNotFoundError(f"site {site_id!r}: the newest result places no fragment")
+    gltf = json.dumps(mesh_gltf(mesh, name=site_id))
+    headers = {"Content-Disposition": f'attachment; filename="{site_id}-layout.gltf"'}
+    return Response(gltf, media_type="model/gltf+json", headers=headers)
