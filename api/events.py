@@ -1,7 +1,8 @@
 """A site's server-sent-event stream, fed by the site's Redis channel.
 
-The stream starts with ``retry``, an ``event: status`` (the SiteStatus) and, if the site has
-been placed, an ``event: result``; then every SiteEvent published by workers and the API
+The stream starts with ``retry``, an ``event: status`` (the SiteStatus; for a site that does not
+exist yet, one with no fragment and ``created_at`` null) and, if the site has been placed, an
+``event: result``; then every SiteEvent published by workers and the API
 (``fragment``, ``placement``, ``result``), and a comment line when idle so proxies keep it open.
 It ends after a ``site`` event (the site was deleted).
 """
@@ -14,7 +15,8 @@ from collections.abc import AsyncIterator
 import anyio
 
 from api.backend import Backend
-from api.store import load_result, load_site_status
+from api.store import load_result, load_site_status, site_exists
+from schemas.service import PlacementStatus, SiteStatus
 from worker.records import site_event
 
 __all__ = ["format_sse", "site_event_stream"]
@@ -26,7 +28,16 @@ def format_sse(event: str, data: str) -> str:
 
 
 async def _initial(backend: Backend, site_id: str) -> list[str]:
-    status = await load_site_status(backend, site_id)
+    if await site_exists(backend, site_id):
+        status = await load_site_status(backend, site_id)
+    else:  # subscribed before the first upload: an empty site, not yet created
+        status = SiteStatus(
+            site_id=site_id,
+            created_at=None,
+            updated_at=None,
+            fragments=[],
+            placement=PlacementStatus(),
+        )
     messages = [format_sse("status", status.model_dump_json())]
     result = await load_result(backend, site_id)
     if result is not None:

@@ -11,7 +11,7 @@ import redis.asyncio as aioredis
 from api.backend import Backend
 from api.errors import FragmentNotFoundError, SiteNotFoundError
 from api.zenoh.presence import load_site_robots
-from schemas.service import FragmentStatus, SiteList, SiteStatus, SiteSummary
+from schemas.service import FragmentStatus, SiteList, SiteStatus, SiteSummary, utc
 from worker.connection import abort_watch, begin_multi, record, strings
 from worker.jobs import request_placement_async
 from worker.keys import GROUP, Keys
@@ -89,7 +89,7 @@ async def list_sites(backend: Backend, offset: int, limit: int) -> SiteList:
             site_id=sid,
             n_fragments=int(count),
             placement=placement_status(rec),
-            updated_at=float(rec.get("updated_at") or 0.0),
+            updated_at=utc(float(rec.get("updated_at") or 0.0)),
         )
         for sid, rec, count in zip(ids, replies[::2], replies[1::2], strict=True)
     ]

@@ -1,14 +1,16 @@
 """Wire models of the HTTP API and of the events the workers publish (versioned JSON).
 
 Internal records (Redis hashes) are converted to these in :mod:`worker.records`; the result
-JSON itself is :class:`schemas.result.ResultModel`.
+JSON itself is :class:`schemas.result.ResultModel`. Times are ISO 8601 strings in UTC
+(``2025-01-31T12:00:00.250000Z``).
 """
 
 from __future__ import annotations
 
+from datetime import UTC, datetime
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AwareDatetime, BaseModel, ConfigDict, Field
 
 from schemas.jobs import FragmentState, PlacementState
 from schemas.result import Status
@@ -28,9 +30,22 @@ __all__ = [
     "SiteStatus",
     "SiteSummary",
     "UploadReply",
+    "utc",
 ]
 
 EVENT_VERSION = 1
+Time = AwareDatetime  # serialized as ISO 8601 with its UTC offset
+
+
+def utc(epoch: float) -> datetime:
+    """A unix time (seconds) as an aware UTC datetime.
+
+    Examples
+    --------
+    >>> utc(0.0).isoformat()
+    '1970-01-01T00:00:00+00:00'
+    """
+    return datetime.fromtimestamp(epoch, tz=UTC)
 
 
 class _Wire(BaseModel):
@@ -74,8 +89,8 @@ class FragmentStatus(_Wire):
     format: str
     n_points: int
     dropped_nonfinite: int = 0
-    created_at: float
-    updated_at: float
+    created_at: Time = Field(description="when the fragment was accepted, ISO 8601")
+    updated_at: Time = Field(description="its last state change, ISO 8601")
 
 
 class PlacementStatus(_Wire):
@@ -93,15 +108,15 @@ class PlacementStatus(_Wire):
     loop_closed: bool = Field(
         False, description="the newest result closes a room (status closed or ambiguous)"
     )
-    last_placement_at: float | None = Field(None, description="unix time of the last result")
-    started_at: float | None = Field(None, description="unix time the newest run started")
+    last_placement_at: Time | None = Field(None, description="time of the last result, ISO 8601")
+    started_at: Time | None = Field(None, description="when the newest run started, ISO 8601")
 
 
 class RobotStatus(_Wire):
     """A robot connected over zenoh (its liveliness token), and what it sent to the site."""
 
     robot_id: str
-    connected_since: float = Field(description="unix time its liveliness token appeared")
+    connected_since: Time = Field(description="when its liveliness token appeared, ISO 8601")
     fragments: list[str] = Field(
         default_factory=list, description="ids of this site's fragments the robot sent"
     )
@@ -109,8 +124,11 @@ class RobotStatus(_Wire):
 
 class SiteStatus(_Wire):
     site_id: str
-    created_at: float
-    updated_at: float
+    created_at: Time | None = Field(
+        description="first upload or hints, ISO 8601; null only in the event stream of a site "
+        "that does not exist yet"
+    )
+    updated_at: Time | None = Field(description="last upload, hints or deletion, ISO 8601")
     fragments: list[FragmentStatus]
     placement: PlacementStatus
     robots: list[RobotStatus] = Field(
@@ -123,7 +141,7 @@ class SiteSummary(_Wire):
     site_id: str
     n_fragments: int
     placement: PlacementStatus
-    updated_at: float
+    updated_at: Time = Field(description="ISO 8601")
 
 
 class SiteList(_Wire):
@@ -164,5 +182,5 @@ class SiteEvent(_Wire):
     site_id: str
     fragment_id: str | None = None
     generation: int | None = None
-    time: float
+    time: Time = Field(description="when the event was published, ISO 8601")
     data: dict[str, Any]

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
+from datetime import datetime
 from typing import Any, Literal, get_args
 
 from schemas.jobs import FragmentState, PlacementState
@@ -18,6 +19,7 @@ from schemas.service import (
     PlacementStatus,
     SiteEvent,
     SiteStatus,
+    utc,
 )
 
 __all__ = [
@@ -38,6 +40,11 @@ CLOSED_STATUSES = ("closed", "ambiguous")  # the main assembly closes a room (lo
 def _float(record: Mapping[str, str], name: str, default: float = 0.0) -> float:
     value = record.get(name)
     return float(value) if value else default
+
+
+def _time(record: Mapping[str, str], name: str) -> datetime | None:
+    value = record.get(name)
+    return utc(float(value)) if value else None
 
 
 def _int(record: Mapping[str, str], name: str, default: int = 0) -> int:
@@ -91,8 +98,8 @@ def fragment_status(fragment_id: str, record: Mapping[str, str]) -> FragmentStat
         format=record.get("format", ""),
         n_points=_int(record, "n_points"),
         dropped_nonfinite=_int(record, "dropped_nonfinite"),
-        created_at=_float(record, "created_at"),
-        updated_at=_float(record, "updated_at"),
+        created_at=utc(_float(record, "created_at")),
+        updated_at=utc(_float(record, "updated_at")),
     )
 
 
@@ -100,8 +107,6 @@ def placement_status(record: Mapping[str, str]) -> PlacementStatus:
     """The wire status of a site's placement from the site hash."""
     result_status = _RESULT_STATUSES.get(record.get("result_status", ""))
     result_generation = record.get("result_generation")
-    last = record.get("last_placement_at")
-    started = record.get("placement_started_at")
     confidence = record.get("result_confidence")
     return PlacementStatus(
         state=PlacementState(record.get("placement_state") or PlacementState.IDLE.value),
@@ -114,8 +119,8 @@ def placement_status(record: Mapping[str, str]) -> PlacementStatus:
         confidence=min(1.0, max(0.0, float(confidence))) if confidence else None,
         alternatives=_int(record, "result_alternatives"),
         loop_closed=record.get("loop_closed") == "1",
-        last_placement_at=float(last) if last else None,
-        started_at=float(started) if started else None,
+        last_placement_at=_time(record, "last_placement_at"),
+        started_at=_time(record, "placement_started_at"),
     )
 
 
@@ -130,8 +135,8 @@ def site_status(
     ``hints``: the site has stored hints."""
     return SiteStatus(
         site_id=site_id,
-        created_at=_float(site, "created_at"),
-        updated_at=_float(site, "updated_at"),
+        created_at=utc(_float(site, "created_at")),
+        updated_at=utc(_float(site, "updated_at")),
         fragments=[fragment_status(fid, rec) for fid, rec in fragments if rec],
         placement=placement_status(site),
         hints=hints,
@@ -152,7 +157,7 @@ def site_event(
         site_id=site_id,
         fragment_id=fragment_id,
         generation=generation,
-        time=time.time(),
+        time=utc(time.time()),
         data=dict(data),
     )
     return event.model_dump_json()

@@ -15,7 +15,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from api.backend import Backend
-from schemas.service import RobotStatus
+from schemas.service import RobotStatus, utc
 from schemas.zenoh import SenderRecord
 from worker.connection import record, strings
 
@@ -105,6 +105,6 @@ async def load_site_robots(
         if sender is not None and sender.robot_id in sent:
             sent[sender.robot_id].append(fid)
     return [
-        RobotStatus(robot_id=rid, connected_since=robots[rid], fragments=sent[rid])
+        RobotStatus(robot_id=rid, connected_since=utc(robots[rid]), fragments=sent[rid])
         for rid in sorted(robots)
     ]

@@ -184,7 +184,7 @@ class RosBridge:
         status = await load_site_status(self.backend, site_id)
         stamps = {}
         for fragment in status.fragments:
-            frac, whole = math.modf(fragment.created_at)
+            frac, whole = math.modf(fragment.created_at.timestamp())
             stamps[fragment.fragment_id] = (int(whole), int(frac * 1e9))
         for fid, sender in (await load_senders(self.backend, site_id)).items():
             if sender.stamp_sec is not None and sender.stamp_nanosec is not None:

@@ -33,7 +33,7 @@ def test_delete_site_removes_everything_it_stored(api: ApiServer, redis_client) 
         assert reply.status_code == 204 and reply.content == b""
         assert _site_keys(redis_client, "s1") == []
         assert redis_client.zscore("fpj:sites", "s1") is None
-        for path in ("", "/result", "/hints", "/floorplan.svg", "/events", "/fragments/a"):
+        for path in ("", "/result", "/hints", "/floorplan.svg", "/layout.gltf", "/fragments/a"):
             got = http.get(f"/v1/sites/s1{path}")
             assert got.status_code == 404 and got.json()["error"]["code"] == "site_not_found"
         assert http.delete("/v1/sites/s1").status_code == 404

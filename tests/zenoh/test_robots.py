@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import json
 import signal
+import time
 from collections.abc import Callable
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
@@ -118,7 +120,8 @@ def test_robot_presence_follows_its_session(zenoh_service: ZenohService) -> None
                 assert replies[0].ok is not None
                 wait_until(lambda: _robots(http, "pres") == {"solo": ["s1"]}, 15)
                 status = http.get("/v1/sites/pres").json()["robots"][0]
-                assert status["connected_since"] > 0
+                since = datetime.fromisoformat(status["connected_since"])  # ISO 8601, UTC
+                assert since.tzinfo is not None and since.timestamp() > time.time() - 60
             wait_until(lambda: _robots(http, "pres") == {}, 15)  # token undeclared
             with session.liveliness().declare_token(keys.robot("solo")):
                 wait_until(lambda: _robots(http, "pres") == {"solo": ["s1"]}, 15)
