@@ -20,7 +20,7 @@ import uvicorn
 from api.main import create_app
 from api.processes import EmbeddedRedis, WorkerSupervisor
 from schemas.settings import Settings, get_settings
-from worker.main import configure_logging
+from worker.logs import configure_logging
 
 __all__ = ["run_server"]
 
@@ -59,7 +59,7 @@ def _start_backing(settings: Settings, stack: ExitStack) -> Settings:
 def run_server(host: str, port: int) -> int:
     """Run the service until SIGTERM/SIGINT; returns the process exit code."""
     settings = get_settings()
-    configure_logging(settings.log_level)
+    configure_logging(settings.log_level, settings.log_json)
     stopping = _Stopping()
     with ExitStack() as stack:
         try:
@@ -74,6 +74,7 @@ def run_server(host: str, port: int) -> int:
             host=host,
             port=port,
             log_level=settings.log_level.lower(),
+            log_config=None,  # keep configure_logging's one format (access lines included)
             timeout_graceful_shutdown=5,
         )
         server = uvicorn.Server(config)

@@ -84,6 +84,10 @@ class Settings(BaseSettings):
     startup_timeout_s: float = Field(30.0, gt=0, description="wait this long for Redis at start")
     sse_keepalive_s: float = Field(15.0, gt=0, description="comment line on idle event streams")
     log_level: str = Field("info", description="debug, info, warning, error")
+    log_json: bool = Field(
+        False,
+        description="log one JSON object per line (API, access lines, workers) instead of text",
+    )
 
     # Zenoh front end (contract section 5; api/zenoh).
     zenoh_listen: str = Field(

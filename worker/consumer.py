@@ -29,6 +29,7 @@ from worker.connection import REDIS_DOWN, ensure_group, strings
 from worker.handlers import HANDLERS, Handler
 from worker.jobs import Extra, ack, dead_letter, retry_later
 from worker.keys import GROUP, Keys
+from worker.logs import log_fields
 from worker.stats import record_job
 from worker.updates import JobContext
 
@@ -211,15 +212,22 @@ class Consumer:
         self.leases.hold(Lease(self.name, message_id, hard))
         started = time.time()
         try:
-            handler.run(ctx, job)
+            report = handler.run(ctx, job)
         except REDIS_DOWN:
             raise  # left pending: reclaimed once Redis is back
         except Exception as exc:
             self._failed(ctx, job, message_id, raw_job, exc)
         else:
+            seconds = time.time() - started
             latency = started - job.enqueued_at if ctx.tries == 1 else None
-            extra = _stats(self.keys, job.kind, "done", time.time() - started, latency)
+            extra = _stats(self.keys, job.kind, "done", seconds, latency)
             ack(self.client, self.keys, message_id, job.job_id, extra)
+            log.info(
+                "%s %s",
+                job.kind,
+                report.get("outcome", "done"),
+                extra=self._fields(ctx, job, seconds=round(seconds, 3), **report),
+            )
         finally:
             self.leases.release(self.name)
 
@@ -233,22 +241,30 @@ class Consumer:
     ) -> None:
         error = _error(exc)
         permanent = isinstance(exc, FragmentError)
+        fields = self._fields(ctx, job, code=error.code, error=error.message)
         if permanent or ctx.tries >= self.settings.max_tries:
-            log.warning("%s: job %s failed for good: %s", self.name, job.job_id, error.message)
+            log.warning("%s failed", job.kind, extra=fields)
             self._give_up(ctx, job, message_id, raw_job, error)
             return
         log.warning(
-            "%s: job %s failed (try %d), retrying: %s",
-            self.name,
-            job.job_id,
-            ctx.tries,
-            error.message,
+            "%s failed, retrying",
+            job.kind,
+            extra=fields,
             exc_info=not isinstance(exc, JigsawError),
         )
         self.handlers[job.kind].failed(ctx, job, error, False)
         retry_later(
             self.client, self.keys, message_id, raw_job, _stats(self.keys, job.kind, "retried")
         )
+
+    def _fields(
+        self, ctx: JobContext, job: LayoutJob | PlacementJob, **values: Any
+    ) -> dict[str, Any]:
+        """The fields of a job's log line: which job, where, which try, then ``values``."""
+        where = {"site": job.site_id}
+        if isinstance(job, LayoutJob):
+            where["fragment"] = job.fragment_id
+        return log_fields(job=job.job_id, **where, tries=ctx.tries, consumer=self.name, **values)
 
     def _give_up(
         self,

@@ -11,7 +11,7 @@ import logging
 import time
 import zlib
 from dataclasses import dataclass
-from typing import Protocol, TypeVar
+from typing import Any, Protocol, TypeVar
 
 from pydantic import ValidationError
 
@@ -37,6 +37,7 @@ __all__ = [
     "HANDLERS",
     "Handler",
     "JobContext",
+    "JobReport",
     "JobTimeoutError",
     "LayoutHandler",
     "PlacementHandler",
@@ -47,11 +48,15 @@ log = logging.getLogger(__name__)
 
 _PENDING = {FragmentState.QUEUED.value, FragmentState.RUNNING.value}
 
+JobReport = dict[str, Any]
+"""What a job did, logged as fields of its one log line: at least ``outcome``."""
+
 
 class Handler(Protocol):
-    """One job kind: run it, or record that it failed (``final``: no more tries)."""
+    """One job kind: run it (returning its report), or record that it failed (``final``: no
+    more tries)."""
 
-    def run(self, ctx: JobContext, job: LayoutJob | PlacementJob) -> None: ...
+    def run(self, ctx: JobContext, job: LayoutJob | PlacementJob) -> JobReport: ...
 
     def failed(
         self, ctx: JobContext, job: LayoutJob | PlacementJob, error: ErrorDetail, final: bool
@@ -70,7 +75,7 @@ def _expect(job: LayoutJob | PlacementJob, kind: type[_J]) -> _J:
 class LayoutHandler:
     """Parse the stored bytes and estimate the fragment's local layout."""
 
-    def run(self, ctx: JobContext, job: LayoutJob | PlacementJob) -> None:
+    def run(self, ctx: JobContext, job: LayoutJob | PlacementJob) -> JobReport:
         job = _expect(job, LayoutJob)
         from services.parsing import parse_fragment
         from services.pipeline import estimate_layout
@@ -78,17 +83,16 @@ class LayoutHandler:
         site, fid, sha = job.site_id, job.fragment_id, job.sha256
         record = ctx.client.hgetall(ctx.keys.fragment(site, fid))
         if record.get("sha256") != sha:
-            log.info("layout job %s is stale: fragment %s/%s changed", job.job_id, site, fid)
-            return
+            return {"outcome": "stale"}  # the fragment was replaced or deleted
         if record.get("state") == FragmentState.DONE.value:
-            return  # redelivered: the layout and its placement request were written together
+            return {"outcome": "already_done"}  # redelivered after its writes
         running = FragmentState.RUNNING.value
         fields = {"state": running, "stage": "decode", "progress": "0", "tries": str(ctx.tries)}
         if not update_fragment(ctx, site, fid, sha, fields):
-            return
+            return {"outcome": "stale"}
         blob = ctx.raw.get(ctx.keys.fragment_data(site, fid))
         if not isinstance(blob, bytes):
-            return
+            return {"outcome": "stale"}
         parsed = parse_fragment(zlib.decompress(blob), ctx.params.parser)
         progress = Progress(ctx, site, (fid, sha))
         layout = estimate_layout(parsed.points, ctx.params, progress=progress)
@@ -96,6 +100,11 @@ class LayoutHandler:
         done = {"state": FragmentState.DONE.value, "stage": "done", "progress": "1"}
         done.update(error_fields("", ""))
         update_fragment(ctx, site, fid, sha, done, layout=wire, place=True)
+        return {
+            "outcome": "done",
+            "points": len(parsed.points),
+            "keypoints": len(layout.keypoints),
+        }
 
     def failed(
         self, ctx: JobContext, job: LayoutJob | PlacementJob, error: ErrorDetail, final: bool
@@ -174,28 +183,40 @@ def _place(ctx: JobContext, site_id: str, snap: _SiteSnapshot) -> ResultModel:
     return result
 
 
+def _result_fields(result: ResultModel) -> JobReport:
+    """What the log says of a placement: status, confidence, fragments placed of all."""
+    return {
+        "status": result.status,
+        "confidence": round(result.confidence, 4),
+        "placed": sum(1 for f in result.fragments if f.placed),
+        "fragments": len(result.fragments),
+        "alternatives": len(result.alternatives),
+    }
+
+
 class PlacementHandler:
     """Place the site's laid-out fragments; coalesced so one runs per site at a time."""
 
-    def run(self, ctx: JobContext, job: LayoutJob | PlacementJob) -> None:
+    def run(self, ctx: JobContext, job: LayoutJob | PlacementJob) -> JobReport:
         job = _expect(job, PlacementJob)
         site_id, flag = job.site_id, ctx.keys.placement_flag(job.site_id)
         holder = ctx.client.get(flag)
         if holder is not None and holder != job.job_id:
-            log.info("placement job %s superseded by %s", job.job_id, holder)
-            return
+            return {"outcome": "superseded", "by": holder}
         if not ctx.client.exists(ctx.keys.site(site_id)):
-            log.info("placement job %s: site %s was deleted", job.job_id, site_id)
-            return
+            return {"outcome": "site_deleted"}
         ctx.client.set(flag, job.job_id, px=placement_flag_ttl_ms(ctx.settings))
         snap = _snapshot(ctx, site_id)
         set_site_fields(ctx, site_id, {"placement_generation": str(snap.generation)})
+        report: JobReport = {"outcome": "done", "generation": snap.generation}
         if snap.created is None:  # deleted meanwhile: write nothing; the flag is released
-            log.info("placement job %s: site %s was deleted", job.job_id, site_id)
+            report["outcome"] = "site_deleted"
         elif any(rec.get("state") in _PENDING for _, rec in snap.fragments):
             self._wait_for_layouts(ctx, site_id)
+            report["outcome"] = "waiting_for_layouts"
         elif not snap.fragments:
             self._clear(ctx, site_id)
+            report["outcome"] = "cleared"
         else:
             update_placement(
                 ctx,
@@ -207,7 +228,9 @@ class PlacementHandler:
             )
             result = _place(ctx, site_id, snap)
             store_result(ctx, site_id, snap.generation, result, site_created=snap.created)
+            report.update(_result_fields(result))
         finish_placement(ctx.client, ctx.keys, ctx.settings, job, snap.generation)
+        return report
 
     @staticmethod
     def _wait_for_layouts(ctx: JobContext, site_id: str) -> None:

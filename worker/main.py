@@ -20,6 +20,7 @@ from schemas.settings import Settings, get_settings
 from worker.connection import REDIS_DOWN, ensure_group, sync_client
 from worker.consumer import BLOCK_MS, Consumer, Keeper, LeaseBook
 from worker.keys import Keys
+from worker.logs import configure_logging
 
 __all__ = ["run_worker", "worker_id"]
 
@@ -29,13 +30,6 @@ log = logging.getLogger("worker")
 def worker_id() -> str:
     """``host-pid``: unique per process, and tells which container a consumer lives in."""
     return f"{socket.gethostname()}-{os.getpid()}"
-
-
-def configure_logging(level: str) -> None:
-    logging.basicConfig(
-        level=level.upper(),
-        format="%(asctime)s %(levelname)s %(name)s[%(process)d]: %(message)s",
-    )
 
 
 def _start(target: Callable[[], None], name: str) -> threading.Thread:
@@ -93,7 +87,7 @@ def serve_jobs(settings: Settings, concurrency: int, stop: threading.Event) -> N
 def run_worker(concurrency: int | None = None) -> int:
     """Entry point of ``jigsaw worker``; returns the process exit code."""
     settings = get_settings()
-    configure_logging(settings.log_level)
+    configure_logging(settings.log_level, settings.log_json)
     if not settings.redis_url:
         log.error("FPJ_REDIS_URL is not set: a worker needs the service's Redis")
         return 2

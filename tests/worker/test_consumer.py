@@ -36,9 +36,10 @@ class Recorder:
         self.runs: list[int] = []
         self.failures: list[tuple[str, bool]] = []
 
-    def run(self, ctx: JobContext, job: Any) -> None:
+    def run(self, ctx: JobContext, job: Any) -> dict[str, Any]:
         self.runs.append(ctx.tries)
         self.behaviour(ctx.tries)
+        return {"outcome": "done"}
 
     def failed(self, ctx: JobContext, job: Any, error: ErrorDetail, final: bool) -> None:
         self.failures.append((error.code, final))
