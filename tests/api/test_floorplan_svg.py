@@ -7,6 +7,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
+from api.colors import fragment_color
 from api.floorplan_svg import render_floorplan_svg
 from schemas.result import ResultModel
 
@@ -107,3 +108,41 @@ def test_ambiguous_result_shows_confidence_and_the_runner_up_dashed() -> None:
     root = ET.fromstring(render_floorplan_svg(closed))
     assert not [p for p in root.findall(f"{NS}polygon") if p.get("stroke-dasharray")]
     assert "confidence 0.97" in " ".join(t.text or "" for t in root.findall(f"{NS}text"))
+
+
+def test_colours_by_id_labels_at_walls_legend_and_scale_bar() -> None:
+    fragments = [
+        {
+            "id": fid,
+            "placed": True,
+            "pose": _pose(yaw, tx, ty),
+            "local_layout": {"keypoints": [[0, 0, 0], [6, 0, 0], [6, 4, 0]]},
+        }
+        for fid, yaw, tx, ty in (("north", 180, 6, 4), ("south", 0, 0, 0))
+    ]
+    room = {"id": "room_0", "polygon": [[0, 0], [6, 0], [6, 4], [0, 4]]}
+    result = ResultModel.model_validate(
+        {"status": "closed", "fragments": fragments, "floorplan": {"rooms": [room]}}
+    )
+    root = ET.fromstring(render_floorplan_svg(result))
+    swapped = result.model_copy(update={"fragments": result.fragments[::-1]})
+    again = ET.fromstring(render_floorplan_svg(swapped))
+    for svg in (root, again):  # the colour follows the id, not the order
+        strokes = {p.get("data-fragment"): p.get("stroke") for p in svg.iter(f"{NS}polyline")}
+        assert strokes == {"north": fragment_color("north"), "south": fragment_color("south")}
+    polygon = root.find(f"{NS}polygon")
+    assert polygon is not None
+    corners = np.array(
+        [[float(v) for v in p.split(",")] for p in str(polygon.get("points")).split()]
+    )
+    low, high = corners.min(axis=0), corners.max(axis=0)
+    labels = {t.text: t for t in root.iter(f"{NS}text") if t.get("class") == "label"}
+    for fid in ("north", "south"):
+        x, y = float(labels[fid].get("x", 0)), float(labels[fid].get("y", 0))
+        assert low[0] <= x <= high[0] and low[1] <= y <= high[1]  # inside the room
+        assert min(abs(y - low[1]), abs(y - high[1])) < 25  # beside a long wall, not at the origin
+    assert float(labels["south"].get("y", 0)) > float(labels["north"].get("y", 0))
+    legend = [t.text for t in root.iter(f"{NS}text")]
+    assert "fragments" in legend and legend.count("north") == 2  # label and legend entry
+    bar = [t.text or "" for t in root.iter(f"{NS}text") if t.text and t.text.endswith(" m")]
+    assert len(bar) == 1 and float(bar[0].split()[0]) in (0.5, 1.0, 2.0, 5.0)
