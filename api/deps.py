@@ -6,7 +6,7 @@ from __future__ import annotations
 import hmac
 from typing import Annotated, cast
 
-from fastapi import Depends, Path, Request
+from fastapi import Depends, Path, Query, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
 from api.backend import Backend
@@ -28,6 +28,7 @@ __all__ = [
     "SiteHints",
     "SiteId",
     "get_backend",
+    "require_stream_token",
     "require_token",
 ]
 
@@ -77,16 +78,34 @@ SiteHints = Annotated[HintsModel, Depends(_site_hints)]
 _bearer = HTTPBearer(auto_error=False, description="one of the tokens of FPJ_TOKENS")
 
 
+def _check_token(tokens: list[str], given: str | None) -> None:
+    if not tokens:
+        return
+    if given is None:
+        raise UnauthorizedError("a bearer token is required (Authorization: Bearer <token>)")
+    if not any(hmac.compare_digest(given.encode(), token.encode()) for token in tokens):
+        raise ForbiddenError("unknown bearer token")
+
+
 async def require_token(
     backend: BackendDep,
     credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
 ) -> None:
     """With tokens configured: 401 without a bearer token, 403 with an unknown one."""
-    tokens = backend.settings.tokens
-    if not tokens:
-        return
-    if credentials is None:
-        raise UnauthorizedError("a bearer token is required (Authorization: Bearer <token>)")
-    given = credentials.credentials.encode()
-    if not any(hmac.compare_digest(given, token.encode()) for token in tokens):
-        raise ForbiddenError("unknown bearer token")
+    _check_token(backend.settings.tokens, credentials.credentials if credentials else None)
+
+
+async def require_stream_token(
+    backend: BackendDep,
+    credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
+    access_token: Annotated[
+        str | None,
+        Query(
+            description="the bearer token, for clients that cannot set headers (a browser's "
+            "EventSource); only read when FPJ_TOKENS is set and no Authorization header is sent"
+        ),
+    ] = None,
+) -> None:
+    """:func:`require_token` that also takes ``?access_token=`` (the event stream only)."""
+    given = credentials.credentials if credentials else access_token
+    _check_token(backend.settings.tokens, given)

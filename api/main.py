@@ -8,9 +8,10 @@ from contextlib import asynccontextmanager
 from fastapi import Depends, FastAPI
 
 from api.backend import Backend
-from api.deps import require_token
+from api.deps import require_stream_token, require_token
 from api.errors import install_error_handlers
 from api.routers import events, fragments, health, hints, metrics, sites
+from api.routers.web import install_web
 from api.zenoh import zenoh_front_end
 from schemas.settings import Settings, get_settings
 
@@ -24,7 +25,9 @@ poses, the floorplan, its status (closed, ambiguous, open, failed), a confidence
 runners-up (contract v2, sections 2 to 4).
 
 Every error answers `{"error": {"code": ..., "message": ...}}`. With `FPJ_TOKENS` set, every
-route but `/healthz` and `/readyz` needs `Authorization: Bearer <token>`.
+route but `/healthz`, `/readyz` and the web pages needs `Authorization: Bearer <token>` (the
+event stream also takes `?access_token=<token>`, for browsers' EventSource). A web view of the
+sites is at `/`.
 """
 
 
@@ -47,6 +50,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         version="1.0.0",
         description=DESCRIPTION,
         lifespan=lifespan,
+        docs_url=None,  # /docs comes from install_web, with local assets
+        redoc_url=None,
     )
     install_error_handlers(app)
     auth = [Depends(require_token)]
@@ -55,5 +60,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(sites.router, dependencies=auth)
     app.include_router(fragments.router, dependencies=auth)
     app.include_router(hints.router, dependencies=auth)
-    app.include_router(events.router, dependencies=auth)
+    app.include_router(events.router, dependencies=[Depends(require_stream_token)])
+    install_web(app)  # /, /sites/{site_id}, /docs and their static files (no token)
     return app

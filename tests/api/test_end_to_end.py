@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import concurrent.futures
 import threading
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -18,12 +17,10 @@ from services.synthetic import SceneSpec, SyntheticScene, generate_scene
 from tests.service_fixtures import (
     ApiServer,
     SiteEvents,
-    Workers,
     make_settings,
     read_events,
     wait_result,
     wait_until,
-    wait_workers_alive,
 )
 
 pytestmark = pytest.mark.timeout(120)
@@ -32,22 +29,6 @@ pytestmark = pytest.mark.timeout(120)
 @pytest.fixture(scope="module")
 def scenes() -> dict[int, SyntheticScene]:
     return {seed: generate_scene(SceneSpec.easy(), seed) for seed in (0, 2)}
-
-
-@pytest.fixture(scope="module")
-def workers(redis7_url: str) -> Iterator[Workers]:
-    """Two worker processes for the whole module (they survive the per-test flush)."""
-    pool = Workers()
-    pool.start(make_settings(redis7_url), count=2)
-    yield pool
-    pool.stop()
-
-
-@pytest.fixture
-def server(redis_url: str, api_factory, workers: Workers, redis_client) -> ApiServer:
-    wait_workers_alive(redis_client, "fpj", 2)
-    server: ApiServer = api_factory(make_settings(redis_url))
-    return server
 
 
 def _upload_all(server: ApiServer, uploads: list[tuple[str, str, bytes]]) -> list[int]:
