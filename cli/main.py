@@ -2,19 +2,71 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
 import typer
+from typer.core import TyperCommand, TyperGroup
 
 if TYPE_CHECKING:
     from api.zenoh.client import RobotOptions
 
+
+_F = TypeVar("_F", bound=Callable[..., Any])
+
+
+def _plain_flags(params: list[Any]) -> list[Any]:
+    """Flags show as ``--premerge`` or ``--latest/--no-latest`` in help, with no ``<bool>``."""
+    for param in params:
+        if getattr(param, "is_flag", False) and param.metavar is None:
+            param.metavar = ""
+    return params
+
+
+class _Command(TyperCommand):
+    def get_params(self, ctx: Any) -> list[Any]:
+        return _plain_flags(super().get_params(ctx))
+
+
+class _Group(TyperGroup):
+    def get_params(self, ctx: Any) -> list[Any]:
+        return _plain_flags(super().get_params(ctx))
+
+
 app = typer.Typer(
+    cls=_Group,
     add_completion=False,
     no_args_is_help=True,
     help="Floorplan-Jigsaw: align partial indoor scans through their room layout.",
 )
+
+
+def command(**kwargs: Any) -> Callable[[_F], _F]:
+    """``app.command`` with the help layout of this CLI."""
+    decorator: Callable[[_F], _F] = app.command(cls=_Command, **kwargs)
+    return decorator
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        from importlib.metadata import version
+
+        typer.echo(f"jigsaw (floorplan-jigsaw) {version('floorplan-jigsaw')}")
+        raise typer.Exit()
+
+
+@app.callback()
+def main(
+    show_version: Annotated[
+        bool,
+        typer.Option(
+            "--version", callback=_print_version, is_eager=True, help="print the version and exit"
+        ),
+    ] = False,
+) -> None:
+    """Floorplan-Jigsaw: align partial indoor scans through their room layout."""
+
 
 PathsArg = Annotated[
     list[Path], typer.Argument(help="fragment files, or directories of *.ply / *.pcd files")
@@ -22,7 +74,7 @@ PathsArg = Annotated[
 OutOpt = Annotated[Path | None, typer.Option("-o", "--output", help="output JSON (default stdout)")]
 
 
-@app.command()
+@command()
 def layout(paths: PathsArg, output: OutOpt = None) -> None:
     """Estimate each fragment's local layout (walls it sees) and write them as JSON."""
     from cli.pipeline import run_layout
@@ -30,7 +82,7 @@ def layout(paths: PathsArg, output: OutOpt = None) -> None:
     raise typer.Exit(run_layout(paths, output))
 
 
-@app.command()
+@command()
 def align(
     paths: PathsArg,
     output: OutOpt = None,
@@ -74,7 +126,7 @@ def align(
     raise typer.Exit(code)
 
 
-@app.command()
+@command()
 def demo(
     out: Annotated[Path, typer.Option(help="folder for the scene, pictures and result")] = Path(
         "out/demo"
@@ -98,18 +150,29 @@ def demo(
     raise typer.Exit(run_demo(out, seed))
 
 
-@app.command()
+@command()
 def serve(
-    host: Annotated[str, typer.Option(help="bind address")] = "127.0.0.1",
+    host: Annotated[
+        str,
+        typer.Option(
+            help="bind address; the default, every interface, matches zenoh's default "
+            "FPJ_ZENOH_LISTEN=tcp/0.0.0.0:7447 (robots reach both); 127.0.0.1 keeps HTTP "
+            "on this machine"
+        ),
+    ] = "0.0.0.0",
     port: Annotated[int, typer.Option(help="TCP port")] = 8000,
 ) -> None:
-    """Run the HTTP service (embedded Redis and local workers unless FPJ_REDIS_URL is set)."""
+    """Run the HTTP service (embedded Redis and local workers unless FPJ_REDIS_URL is set).
+
+    Web view at http://HOST:PORT/, API docs at /docs. Set FPJ_TOKENS when the network is not
+    trusted: every route but /healthz, /readyz and the web pages then needs a token.
+    """
     from api.server import run_server
 
     raise typer.Exit(run_server(host, port))
 
 
-@app.command()
+@command()
 def worker(
     concurrency: Annotated[
         int | None, typer.Option(help="parallel jobs (default settings)")
@@ -178,7 +241,7 @@ def _robot_options(
     )
 
 
-@app.command()
+@command()
 def send(
     files: Annotated[list[Path], typer.Argument(help="PLY/PCD files; fragment id = file stem")],
     site: SiteOpt,
@@ -218,7 +281,7 @@ def send(
     raise typer.Exit(send_fragments(options, site, files, sys.stdout, sys.stderr, prior=known))
 
 
-@app.command()
+@command()
 def watch(
     site: SiteOpt,
     connect: ConnectOpt = None,

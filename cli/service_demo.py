@@ -41,7 +41,16 @@ def _start_service(port: int, data_dir: Path) -> subprocess.Popen[bytes]:
         "FPJ_LOG_LEVEL": "WARNING",
     }
     env.pop("FPJ_REDIS_URL", None)
-    command = [sys.executable, "-m", "cli.main", "serve", "--port", str(port)]
+    command = [
+        sys.executable,
+        "-m",
+        "cli.main",
+        "serve",
+        "--host",
+        "127.0.0.1",
+        "--port",
+        str(port),
+    ]
     return subprocess.Popen(command, env=env, cwd=Path(__file__).resolve().parents[1])
 
 
