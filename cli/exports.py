@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from api.colors import fragment_rgb
 from cli.pictures import Canvas, palette
 from schemas.result import ResultModel
 from services.layout_model import LayoutMesh, layout_mesh
@@ -118,19 +119,18 @@ def aligned_cloud_ply(
     ----------
     clouds : id -> (N, 3) float64, fragment-local, meters.
     result : the alignment result; unplaced fragments are left out.
-    colour : add uchar ``red``/``green``/``blue`` per point, one palette colour per fragment
-        (the fragment's position in ``result.fragments``, as in the pictures).
+    colour : add uchar ``red``/``green``/``blue`` per point, one colour per fragment id
+        (:func:`api.colors.fragment_rgb`, as in the pictures and the web view).
     max_points_per_fragment : keep every k-th point so each fragment has at most this many.
     """
     poses = placed_poses(result)
-    index = {f.id: k for k, f in enumerate(result.fragments)}
     parts, colours = [np.zeros((0, 3))], [np.zeros((0, 3), np.uint8)]
     for fid, pose in poses.items():
         if fid not in clouds:
             continue
         points = clouds[fid][:: _stride(len(clouds[fid]), max_points_per_fragment)]
         parts.append(_to_site(points, pose))
-        colours.append(np.tile(np.array(palette(index[fid]), np.uint8), (len(points), 1)))
+        colours.append(np.tile(np.array(fragment_rgb(fid), np.uint8), (len(points), 1)))
     points = np.vstack(parts)
     extra = None
     if colour:
@@ -324,10 +324,10 @@ def floorplan_canvas(
     """Top view of the site: placed points per fragment, the room walls, ids, a scale bar.
 
     Points are the wall slice (0.2 to 2 m above the floor) of each placed fragment, at most
-    ``max_points`` per fragment, in the fragment's palette colour, over the room polygon drawn
+    ``max_points`` per fragment, in the fragment's colour (by id), over the room polygon drawn
     thick black; without a closed room each placed chain is drawn in its fragment's colour.
     """
-    poses, index = placed_poses(result), {f.id: k for k, f in enumerate(result.fragments)}
+    poses = placed_poses(result)
     slices = {
         fid: _wall_slice(_to_site(clouds[fid][:: _stride(len(clouds[fid]), max_points)], p), 0.0)
         for fid, p in poses.items()
@@ -341,10 +341,10 @@ def floorplan_canvas(
     for polygon in rooms:  # under the points, so misplaced wall points stay visible
         canvas.polyline(polygon, (0, 0, 0), width=5, closed=True)
     for fid, points in slices.items():
-        canvas.points(points[:, :2], palette(index[fid]))
+        canvas.points(points[:, :2], fragment_rgb(fid))
     if not rooms:
         for fid, chain in chains.items():
-            canvas.polyline(chain, _darker(palette(index[fid])), width=3)
+            canvas.polyline(chain, _darker(fragment_rgb(fid)), width=3)
     for fid, points in slices.items():
         if len(points):
             canvas.label(np.median(points[:, :2], axis=0).tolist(), html.escape(fid))

@@ -10,6 +10,7 @@ import numpy as np
 import open3d as o3d
 import pytest
 
+from api.colors import fragment_rgb
 from cli.exports import (
     ExportTargets,
     aligned_cloud_ply,
@@ -20,7 +21,6 @@ from cli.exports import (
     mesh_ply,
     write_exports,
 )
-from cli.pictures import palette
 from cli.scene_io import TRUTH_FILE, read_truth, write_scene
 from schemas.params import ParserLimits
 from schemas.result import (
@@ -146,8 +146,9 @@ def test_aligned_cloud_transforms_and_colours(tmp_path: Path) -> None:
     path = tmp_path / "cloud.ply"
     path.write_bytes(data)
     colours = np.asarray(o3d.io.read_point_cloud(path).colors)
-    np.testing.assert_allclose(colours[0] * 255, palette(0), atol=0.5)
-    np.testing.assert_allclose(colours[-1] * 255, palette(1), atol=0.5)
+    # one colour per fragment id, as in the service's pictures and the web view
+    np.testing.assert_allclose(colours[0] * 255, fragment_rgb("a"), atol=0.5)
+    np.testing.assert_allclose(colours[-1] * 255, fragment_rgb("b"), atol=0.5)
 
 
 def test_pictures_png_and_svg() -> None:
