@@ -10,6 +10,8 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from schemas.frames import FrameParams
+
 __all__ = [
     "LayoutParams",
     "ManhattanParams",
@@ -55,6 +57,10 @@ class LayoutParams(_Frozen):
     complexity_penalty: float = Field(0.1, ge=0, description="lambda in the edge weight")
     boundary_band: float = Field(0.10, gt=0, description="half-width of the boundary band, m")
     min_wall_cells: int = Field(3, ge=1, description="shortest candidate wall segment, cells")
+    frame: FrameParams = Field(
+        default_factory=FrameParams,
+        description="RGB-D frames: depth range, pixel stride, merging of overlapping frames",
+    )
     source_target: Literal["evidence", "spanning_forest"] = Field(
         "evidence",
         description="how the chain is chosen: the simple path that explains the most wall "

@@ -9,6 +9,7 @@ interior stays on the left, with the paper's weight ``(L - H) / H + lambda``.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,6 +17,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra, minimum_spanning_tree
 
 from schemas.params import LayoutParams
+from services.frustum import CameraView, in_any_view
 from services.types import FloatArray
 from services.wall_lines import WallLine
 
@@ -277,13 +279,50 @@ def _corners_only(points: FloatArray) -> FloatArray:
     return kept
 
 
-def find_wall_chain(lines: list[WallLine], params: LayoutParams) -> WallChain | None:
+def _frustum_path(
+    we: csr_matrix, points: FloatArray, views: Sequence[CameraView]
+) -> tuple[list[int], float] | None:
+    """The paper's rule for RGB-D frames: source and target are the two candidate keypoints
+    inside the cameras' view with the widest angle seen from the camera (the mean of the
+    centres), joined by a path; the min-cost path between them. Ties go to the cheaper path.
+    """
+    if len(points) < 2:
+        return None
+    inside = np.flatnonzero(in_any_view(views, points))
+    if len(inside) < 2:
+        return None
+    centre = np.mean([view.centre[:2] for view in views], axis=0)
+    heading = np.mean([view.forward for view in views], axis=0)
+    offset = points[inside] - centre
+    bearing = np.arctan2(offset[:, 1], offset[:, 0]) - np.arctan2(heading[1], heading[0])
+    bearing = np.angle(np.exp(1j * bearing))
+    dist, pred = dijkstra(we, directed=True, indices=inside, return_predecessors=True)
+    reach = dist[:, inside]
+    spread = np.abs(bearing[:, None] - bearing[None, :])
+    # Widest angle first; among (nearly) equal angles the cheaper path.
+    score = np.where(np.isfinite(reach) & (reach > 0), spread - 1e-3 * reach, -np.inf)
+    a, b = np.unravel_index(int(np.argmax(score)), score.shape)
+    if not np.isfinite(score[a, b]):
+        return None
+    source, target = int(inside[a]), int(inside[b])
+    path = [target]
+    while path[-1] != source:
+        path.append(int(pred[a, path[-1]]))
+    return path[::-1], float(reach[a, b])
+
+
+def find_wall_chain(
+    lines: list[WallLine], params: LayoutParams, views: Sequence[CameraView] = ()
+) -> WallChain | None:
     """Choose source and target and return the minimum-cost chain between them.
 
     Parameters
     ----------
     lines : candidate wall lines of one fragment, aligned frame.
     params : the complexity penalty lambda and the source/target rule.
+    views : the cameras of an RGB-D frame (aligned frame): source and target are then the
+        widest pair of keypoints seen from the camera (paper supplement), replacing the rule
+        of ``params.source_target``; when no pair in view is joined, that rule decides.
 
     Returns
     -------
@@ -293,9 +332,10 @@ def find_wall_chain(lines: list[WallLine], params: LayoutParams) -> WallChain | 
         return None
     nodes = _build_nodes(lines)
     we, st, cover = _edges(lines, nodes, params.complexity_penalty)
-    if params.source_target == "spanning_forest":
+    found = _frustum_path(we, np.asarray(nodes.points), views) if views else None
+    if found is None and params.source_target == "spanning_forest":
         found = _forest_path(we, st)
-    else:
+    elif found is None:
         found = _best_path(we, cover, np.asarray(nodes.points))
     if found is None:
         return None

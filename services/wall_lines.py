@@ -13,12 +13,15 @@ row of grid cells of size ``s`` along it. A cell on a line has high wall evidenc
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from schemas.params import LayoutParams
+from services.frustum import CameraView, visible_band
 from services.types import FloatArray
 
 __all__ = ["WallLine", "evidence_threshold", "find_wall_lines"]
@@ -33,6 +36,7 @@ _MAX_GAP_CELLS = 2  # low cells bridged inside one candidate segment
 _OCCLUSION_REACH = 3.0  # m, longest occluded stretch bridged between parallel walls
 _SUPPORT_POINTS = 3  # interior-strip points that show the line's cell borders scanned space
 _TOP_REACH = 0.85  # share of the floor-to-ceiling band a wall column must reach
+_MIN_VISIBLE = 0.5  # m, least height of a column a camera must see to judge it
 _AXIS_COS = float(np.cos(np.radians(25.0)))  # a normal within 25 deg of an axis faces along it
 
 
@@ -51,6 +55,7 @@ class WallLine:
     virtual: True for a line deduced across an occluded stretch (no points of its own).
     seen_through: (C,) bool or None: cells with no evidence where space was scanned behind
     the line as well as in front (None on a deduced wall).
+    occupied: (C,) bool or None: cells holding any wall point of the line, at any height.
     """
 
     axis: int
@@ -63,6 +68,7 @@ class WallLine:
     virtual: bool = False
     unsupported: NDArray[np.bool_] | None = None
     seen_through: NDArray[np.bool_] | None = None
+    occupied: NDArray[np.bool_] | None = None
 
     def open_gap(self, start: float, end: float) -> float:
         """Longest stretch (m) between two run coordinates with neither wall evidence nor
@@ -191,11 +197,32 @@ def _make_grid(xy: FloatArray, cell: float, counted: NDArray[np.bool_]) -> _Grid
 @dataclass(frozen=True)
 class _TallRule:
     """When a cell's column counts as standing wall: N height bins, reaching the top part
-    of the floor-to-ceiling band (furniture stops lower; walls reach the ceiling)."""
+    of the floor-to-ceiling band (furniture stops lower; walls reach the ceiling).
+
+    With camera views (an RGB-D frame), both are measured against the part of the column
+    the cameras saw: a wall near the camera shows only its lower part.
+    """
 
     n: int
     floor_z: float
     top_bin: int
+    top_z: float = np.inf
+    views: tuple[CameraView, ...] = ()
+
+    def per_cell(self, xy: FloatArray, cell: float) -> tuple[FloatArray, FloatArray]:
+        """(C,) least height bins and (C,) least top bin of the columns at ``xy`` (C, 2)."""
+        n = np.full(len(xy), float(self.n))
+        top = np.full(len(xy), float(self.top_bin))
+        if not self.views:
+            return n, top
+        low, high = visible_band(self.views, xy)
+        seen = ~np.isnan(high)
+        high = np.minimum(high[seen], self.top_z)
+        visible = high - np.maximum(low[seen], self.floor_z + 0.1)
+        # A column seen over less than half a meter cannot tell a wall from furniture.
+        n[seen] = np.where(visible < _MIN_VISIBLE, np.inf, np.clip(0.5 * visible / cell, 3, self.n))
+        top[seen] = np.minimum(top[seen], np.floor((high - self.floor_z - 0.25) / cell))
+        return n, top
 
 
 def _lines_from_peak(
@@ -222,7 +249,10 @@ def _lines_from_peak(
     keys = np.unique(cells * 4096 + z_bins)
     reach = np.zeros(n_cells, dtype=np.int64)
     np.maximum.at(reach, keys // 4096, keys % 4096)
-    tall = (np.bincount(keys // 4096, minlength=n_cells) >= rule.n) & (reach >= rule.top_bin)
+    run = origin + (np.arange(n_cells) + 0.5) * s
+    xy = np.column_stack([run, np.full(n_cells, offset)])
+    least_n, least_top = rule.per_cell(xy if axis == 0 else xy[:, ::-1], s)
+    tall = (np.bincount(keys // 4096, minlength=n_cells) >= least_n) & (reach >= least_top)
     behind, front = grid.strip_sums(axis, offset, np.arange(n_cells))
     lines = []
     for sign, near_side, far_side in ((1, front, behind), (-1, behind, front)):
@@ -238,7 +268,17 @@ def _lines_from_peak(
         seen_through = ~high & (far_side >= _SUPPORT_POINTS)
         lines.append(
             WallLine(
-                axis, offset, travel, origin, s, high, segments, False, unsupported, seen_through
+                axis,
+                offset,
+                travel,
+                origin,
+                s,
+                high,
+                segments,
+                False,
+                unsupported,
+                seen_through,
+                np.bincount(cells, minlength=n_cells) > 0,
             )
         )
     return lines
@@ -320,6 +360,7 @@ def find_wall_lines(
     floor_z: float,
     ceiling_z: float | None,
     params: LayoutParams,
+    views: Sequence[CameraView] = (),
 ) -> list[WallLine]:
     """Detect candidate wall lines with their evidence.
 
@@ -329,6 +370,8 @@ def find_wall_lines(
     normals : (M, 3) float64, their unit normals in the aligned frame.
     floor_z, ceiling_z : heights in the aligned frame (ceiling None when unseen).
     params : grid cell size, N, shortest segment.
+    views : the cameras of an RGB-D frame (aligned frame): the height a wall column must
+        show is then measured against what they saw of it.
     """
     if len(aligned) == 0:
         return []
@@ -347,6 +390,8 @@ def find_wall_lines(
         n=evidence_threshold(np.bincount(keys // 4096), band, params),
         floor_z=floor_z,
         top_bin=int((0.1 + _TOP_REACH * band) / params.cell_size),
+        top_z=top,
+        views=tuple(views),
     )
     lines: list[WallLine] = []
     for axis in (0, 1):
@@ -361,4 +406,47 @@ def find_wall_lines(
                 continue  # a peak of the binned histogram can fall between the points
             offset = float(np.median(members[:, offset_axis]))
             lines += _lines_from_peak(axis, offset, members, grid, rule, params)
+    if views:
+        lines = _facing_cameras(lines, views, params)
     return lines + _occluded_links(lines, grid)
+
+
+def _interior_sign(line: WallLine) -> int:
+    """+1 when the interior lies at higher offsets than the line, else -1."""
+    return line.travel if line.axis == 0 else -line.travel
+
+
+def _facing_cameras(
+    lines: list[WallLine], views: Sequence[CameraView], params: LayoutParams
+) -> list[WallLine]:
+    """What an RGB-D frame's walls must satisfy: the camera stands on their interior side,
+    and no nearer wall stands between it and them (a wall seen through a door or window of
+    a nearer one is the next room's). Cells seen through a nearer line's wall points (at any
+    height: a window leaves wall below and above it) lose their evidence."""
+    centre = np.mean([view.centre[:2] for view in views], axis=0)
+    facing = [
+        line for line in lines if (centre[1 - line.axis] - line.offset) * _interior_sign(line) > 0
+    ]
+    kept = []
+    for far in facing:
+        c_off, c_run = centre[1 - far.axis], centre[far.axis]
+        high = far.high.copy()
+        run = far.origin + (np.arange(len(high)) + 0.5) * far.cell_size
+        for near in facing:
+            if near.axis != far.axis or near.occupied is None:
+                continue
+            ratio = (near.offset - c_off) / (far.offset - c_off)
+            if not 0.0 < ratio < 1.0 - _NEAR_STRIP:
+                continue
+            cell = np.rint((c_run + (run - c_run) * ratio - near.origin) / near.cell_size)
+            inside = (cell >= 1) & (cell < len(near.occupied) - 1)
+            index = cell[inside].astype(np.int64)
+            through = near.occupied[index] | near.occupied[index - 1] | near.occupied[index + 1]
+            high[np.flatnonzero(inside)[through]] = False
+        spans = _runs(high, _MAX_GAP_CELLS, params.min_wall_cells)
+        if spans:
+            segments = np.array(
+                [[far.origin + a * far.cell_size, far.origin + b * far.cell_size] for a, b in spans]
+            )
+            kept.append(dataclasses.replace(far, high=high, segments=segments))
+    return kept

@@ -1,0 +1,94 @@
+"""RGB-D frames (contract v2, section 1): the intrinsics file, frame parameters, archive limits.
+
+An RGB-D frame is ``depth.png`` (16-bit, one channel; value / depth_scale = meters along the
+optical axis, 0 = no reading), ``intrinsics.json`` (:class:`IntrinsicsModel`) and optionally
+``color.png`` or ``color.jpg`` of the same size; over HTTP and zenoh one zip archive of them.
+"""
+
+from __future__ import annotations
+
+import math
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+__all__ = ["ArchiveLimits", "FrameParams", "IntrinsicsModel"]
+
+
+class IntrinsicsModel(BaseModel):
+    """``intrinsics.json``: pinhole camera of the depth image (pixels), depth units.
+
+    Unknown extra fields are ignored (datasets carry more, e.g. a distortion model).
+    """
+
+    model_config = ConfigDict(frozen=True, extra="ignore")
+
+    width: int = Field(gt=0, le=16384, description="image width, pixels")
+    height: int = Field(gt=0, le=16384, description="image height, pixels")
+    fx: float = Field(gt=0, description="focal length along x, pixels")
+    fy: float = Field(gt=0, description="focal length along y, pixels")
+    cx: float = Field(description="principal point x, pixels")
+    cy: float = Field(description="principal point y, pixels")
+    depth_scale: float = Field(1000.0, gt=0, description="depth value per meter")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> IntrinsicsModel:
+        values = (self.fx, self.fy, self.cx, self.cy, self.depth_scale)
+        if not all(math.isfinite(v) for v in values):
+            raise ValueError("fx, fy, cx, cy and depth_scale must be finite")
+        if not (0.0 <= self.cx <= self.width and 0.0 <= self.cy <= self.height):
+            raise ValueError(
+                f"principal point ({self.cx}, {self.cy}) lies outside the "
+                f"{self.width}x{self.height} image"
+            )
+        return self
+
+
+class FrameParams(BaseModel):
+    """How a frame becomes a local layout, and when overlapping frames are merged."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    min_depth: float = Field(0.1, gt=0, description="readings nearer than this are dropped, m")
+    max_depth: float = Field(10.0, gt=0, description="readings farther than this are dropped, m")
+    stride: int = Field(
+        4, ge=1, le=16, description="every stride-th pixel of each row and column is used"
+    )
+    max_pixels: int = Field(
+        16_777_216, ge=1, description="largest depth image (width x height) decoded"
+    )
+    orb_features: int = Field(1500, ge=50, description="ORB keypoints per colour image")
+    match_ratio: float = Field(0.8, gt=0, le=1, description="Lowe's ratio test on ORB matches")
+    min_matches: int = Field(
+        25, ge=3, description="depth-backed ORB matches a pair needs to be tried"
+    )
+    merge_inlier_share: float = Field(
+        0.5,
+        gt=0,
+        le=1,
+        description="share of the matches a rigid fit must explain for two frames to merge",
+    )
+    min_inliers: int = Field(20, ge=3, description="matches the rigid fit must explain, at least")
+    inlier_distance: float = Field(
+        0.05, gt=0, description="3D distance under which a match agrees with the fit, m"
+    )
+    ransac_iterations: int = Field(400, ge=10, description="rigid-fit RANSAC iterations")
+
+    @model_validator(mode="after")
+    def _range(self) -> FrameParams:
+        if self.max_depth <= self.min_depth:
+            raise ValueError("max_depth must exceed min_depth")
+        return self
+
+
+class ArchiveLimits(BaseModel):
+    """Bounds on a frame's zip archive, checked on the declared sizes and while inflating."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    max_entries: int = Field(8, ge=1, description="most entries (files and folders)")
+    max_entry_bytes: int = Field(
+        64 * 1024 * 1024, ge=1, description="largest uncompressed entry, bytes"
+    )
+    max_total_bytes: int = Field(
+        128 * 1024 * 1024, ge=1, description="largest uncompressed total, bytes"
+    )

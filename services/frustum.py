@@ -1,0 +1,138 @@
+"""Camera frustums of RGB-D frames on the floorplan (paper supplement, "RGB-D images").
+
+A frame's points all lie inside its camera's frustum. Projected on the floor plan it bounds
+where the frame's wall chain can start and end (the widest pair of keypoints seen from the
+camera, :func:`services.wall_graph.find_wall_chain`), and over each floor-plan column it
+bounds the height the camera saw: a wall near the camera shows only its lower part, so the
+"reaches the ceiling" test of the wall evidence is measured against what was visible
+(:func:`services.wall_lines.find_wall_lines`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from schemas.frames import IntrinsicsModel
+from services.types import FloatArray
+
+__all__ = ["CameraView", "in_any_view", "visible_band"]
+
+_FLAT = 1e-9
+
+
+@dataclass(frozen=True)
+class CameraView:
+    """One camera's frustum, in a fragment's aligned frame (z up).
+
+    centre: (3,) float64, the camera's optical centre.
+    normals: (4, 3) float64, unit normals of the frustum's side planes (left, right, top,
+    bottom image edges, each through the centre), pointing into the frustum.
+    """
+
+    centre: FloatArray
+    normals: FloatArray
+
+    @classmethod
+    def from_intrinsics(
+        cls, intrinsics: IntrinsicsModel, rotation: FloatArray, centre: FloatArray
+    ) -> CameraView:
+        """The frustum of a pinhole camera.
+
+        Parameters
+        ----------
+        intrinsics : image size and focal lengths, pixels.
+        rotation : (3, 3) optical frame -> aligned frame.
+        centre : (3,) the optical centre, aligned frame.
+        """
+        k = intrinsics
+        u0, u1 = (-0.5 - k.cx) / k.fx, (k.width - 0.5 - k.cx) / k.fx
+        v0, v1 = (-0.5 - k.cy) / k.fy, (k.height - 0.5 - k.cy) / k.fy
+        corners = np.array([[u0, v0, 1.0], [u1, v0, 1.0], [u1, v1, 1.0], [u0, v1, 1.0]])
+        # Edges left (bottom-left to top-left), right, top, bottom as corner pairs.
+        pairs = ((3, 0), (1, 2), (0, 1), (2, 3))
+        normals = np.array([np.cross(corners[a], corners[b]) for a, b in pairs])
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        normals *= np.sign(normals @ np.array([0.0, 0.0, 1.0]))[:, None]  # into the view
+        return cls(np.asarray(centre, dtype=np.float64), normals @ rotation.T)
+
+    @property
+    def forward(self) -> FloatArray:
+        """(2,) unit heading of the optical axis on the floor plan."""
+        axis = self.normals.sum(axis=0)[:2]
+        norm = float(np.linalg.norm(axis))
+        return axis / norm if norm > 0 else np.array([1.0, 0.0])
+
+    def band(self, xy: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Lowest and highest height the camera sees over each floor-plan column.
+
+        Parameters
+        ----------
+        xy : (M, 2) float64, column positions, aligned frame.
+
+        Returns
+        -------
+        low, high : (M,) float64, aligned z; ``low > high`` where the column lies outside
+            the frustum.
+        """
+        d = np.asarray(xy, dtype=np.float64) - self.centre[:2]
+        low = np.full(len(d), -np.inf)
+        high = np.full(len(d), np.inf)
+        for n in self.normals:
+            across = d @ n[:2]
+            if n[2] > _FLAT:  # n . (d, z) >= 0 bounds z from below
+                low = np.maximum(low, -across / n[2])
+            elif n[2] < -_FLAT:
+                high = np.minimum(high, -across / n[2])
+            else:
+                high = np.where(across < 0.0, -np.inf, high)
+        return low + self.centre[2], high + self.centre[2]
+
+
+def visible_band(views: Sequence[CameraView], xy: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The union over cameras of :meth:`CameraView.band`: (low, high), ``low > high`` (both
+    NaN) where no camera sees the column.
+
+    >>> view = CameraView.from_intrinsics(
+    ...     IntrinsicsModel(width=640, height=480, fx=525, fy=525, cx=319.5, cy=239.5),
+    ...     np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]]), np.zeros(3))
+    >>> low, high = visible_band([view], np.array([[0.0, 2.0], [0.0, -2.0]]))
+    >>> bool(abs(high[0] - 2.0 * 240 / 525) < 1e-9), bool(np.isnan(high[1]))
+    (True, True)
+    """
+    low = np.full(len(xy), np.inf)
+    high = np.full(len(xy), -np.inf)
+    for view in views:
+        lo, hi = view.band(xy)
+        seen = lo <= hi
+        low = np.where(seen, np.minimum(low, lo), low)
+        high = np.where(seen, np.maximum(high, hi), high)
+    unseen = low > high
+    low[unseen] = np.nan
+    high[unseen] = np.nan
+    return low, high
+
+
+def in_any_view(
+    views: Sequence[CameraView], xy: FloatArray, tolerance_deg: float = 3.0
+) -> NDArray[np.bool_]:
+    """(M,) True where a floor-plan point lies within some camera's horizontal field of view
+    (its left and right image edges, widened by ``tolerance_deg``), in front of it.
+
+    xy : (M, 2) float64, aligned frame.
+    """
+    points = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    slack = np.sin(np.radians(tolerance_deg))
+    found = np.zeros(len(points), dtype=bool)
+    for view in views:
+        d = points - view.centre[:2]
+        length = np.linalg.norm(d, axis=1)
+        ok = (d @ view.forward) > 0
+        for n in view.normals[:2]:
+            side = n[:2] / max(float(np.linalg.norm(n[:2])), 1e-12)
+            ok &= d @ side >= -slack * length
+        found |= ok
+    return found
