@@ -141,9 +141,11 @@ _DESCRIPTIONS = {
     403: "unknown bearer token",
     404: "unknown site or fragment, no hints stored, or nothing placed to export",
     409: "different bytes already stored under this fragment id",
-    413: "body too large (bytes or points)",
-    415: "not a PLY or PCD file",
-    422: "invalid content: empty, truncated, malformed, too few finite points; invalid hints",
+    413: "body too large (bytes or points; an archive with too many or too large entries)",
+    415: "not a PLY or PCD file, nor an RGB-D frame's zip archive",
+    422: "invalid content: empty, truncated, malformed, too few finite points; a hostile or "
+    "truncated archive, a depth image not 16-bit single-channel or all zero, intrinsics "
+    "missing or not matching, colour of another size; invalid hints",
     503: "Redis unreachable; retry later",
 }
 

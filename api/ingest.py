@@ -1,7 +1,8 @@
 """The single ingest path of a fragment upload, shared by every front end (HTTP, zenoh).
 
 Order of checks: ids, size, then identical/conflicting bytes already stored (by SHA-256),
-then the same parser as the CLI; only a fragment that parses is stored (its original bytes,
+then the same decoder as the CLI (PLY, PCD, or an RGB-D frame's zip archive,
+:func:`api.frames.decode_upload`); only a fragment that parses is stored (its original bytes,
 zlib-compressed) and gets its layout job, all in one WATCH/MULTI transaction. A rejected upload
 leaves the site exactly as it was.
 """
@@ -18,13 +19,13 @@ import redis
 
 from api.backend import Backend
 from api.errors import ConflictError, check_id
+from api.frames import decode_upload
 from api.metrics import UPLOAD_BYTES, UPLOADS
 from api.store import touch_site
 from schemas.jobs import FragmentState, LayoutJob, encode_job
 from schemas.service import UploadReply
 from services.errors import FragmentTooLargeError, InvalidFragmentError, JigsawError
-from services.parsing import parse_fragment
-from services.types import ParsedFragment
+from services.fragments import Fragment, dropped_count, fragment_format, reading_count
 from worker.connection import abort_watch, begin_multi, hash_fields, record
 from worker.records import fragment_status, new_fragment_record, site_event
 
@@ -45,7 +46,7 @@ async def ingest_fragment(
     site_id, fragment_id : str
         1 to 64 characters of ``[A-Za-z0-9._-]``.
     data : bytes
-        The whole PLY or PCD file.
+        The whole PLY or PCD file, or an RGB-D frame's zip archive.
 
     Returns
     -------
@@ -99,16 +100,15 @@ async def _ingest(backend: Backend, site_id: str, fragment_id: str, data: bytes)
     existing = record(await backend.redis.hgetall(key))
     if existing:
         return _same_or_conflict(site_id, fragment_id, sha, existing)
-    parsed: ParsedFragment = await asyncio.to_thread(
-        parse_fragment, data, backend.settings.parser_limits()
-    )
+    params = backend.settings.pipeline_params()
+    parsed: Fragment = await asyncio.to_thread(decode_upload, data, params)
     blob = await asyncio.to_thread(compress, data, backend.settings.compress_level)
     fields = new_fragment_record(
         sha256=sha,
         size_bytes=len(data),
-        fmt=parsed.format,
-        n_points=len(parsed.points),
-        dropped=parsed.dropped_nonfinite,
+        fmt=fragment_format(parsed),
+        n_points=reading_count(parsed, params),
+        dropped=dropped_count(parsed),
         now=time.time(),
     )
     job = LayoutJob(site_id=site_id, fragment_id=fragment_id, sha256=sha)

@@ -22,7 +22,7 @@ from rich.console import Console
 from rich.table import Table
 
 from cli.exports import floorplan_canvas, layout_canvas, layout_model, save_picture, write_model
-from cli.pipeline import AlignRun, align_fragments, read_fragments
+from cli.pipeline import AlignRun, align_fragments, fragment_clouds, read_fragments
 from cli.scene_io import read_truth, write_scene
 from schemas.params import PipelineParams
 from services.evaluation import SceneReport, acc_local, evaluate_result
@@ -148,11 +148,12 @@ def _demo(out: Path, seed: int, console: Console) -> int:
     with _timed(seconds, "write PLYs"):
         write_scene(scene, out / "scene")
     with _timed(seconds, "read PLYs"):
-        clouds = read_fragments([out / "scene"], params)
-    if not clouds:
+        fragments = read_fragments([out / "scene"], params)
+    if not fragments:
         console.print("[red]no usable fragment was read back[/]")
         return EXIT_FAILED
-    run = align_fragments(clouds, params)
+    clouds = fragment_clouds(fragments, params)
+    run = align_fragments(fragments, params)
     seconds |= {f"{stage} (pipeline)": value for stage, value in run.seconds.items()}
     with _timed(seconds, "exports"):
         written = _write_outputs(out, clouds, run)

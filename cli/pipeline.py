@@ -7,70 +7,109 @@ from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from time import perf_counter
 from typing import Any
 
+import numpy as np
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from cli.exports import ExportTargets, write_exports
+from cli.frames import dataset_frames, is_dataset, is_frame_dir, read_frame_dir, read_frame_zip
 from cli.preflight import OptionFileError, output_problems, read_option_file
 from schemas.hints import HintsModel
 from schemas.params import PipelineParams
 from schemas.result import ResultModel
 from services.errors import JigsawError
+from services.fragments import Fragment, dropped_count, fragment_layout, fragment_points
+from services.frame_merge import FrameGroup, expand_frame_groups, group_frames, group_layout
 from services.parsing import parse_fragment
-from services.pipeline import align_clouds, estimate_layout, place_site
+from services.pipeline import align_clouds, place_site
+from services.rgbd import RgbdFrame
 from services.types import FloatArray, LocalLayout
 
 __all__ = [
     "AlignRun",
     "align_fragments",
     "collect_paths",
+    "fragment_clouds",
     "read_fragments",
     "run_align",
     "run_layout",
 ]
 
 EXIT_OK, EXIT_INTERNAL, EXIT_NO_INPUT = 0, 1, 2
-_SUFFIXES = (".ply", ".pcd")
+_SUFFIXES = (".ply", ".pcd", ".zip")
+
+
+def _is_input_dir(path: Path) -> bool:
+    """An RGB-D frame folder or a dataset sequence (as opposed to a folder of inputs)."""
+    return is_frame_dir(path) or is_dataset(path)
 
 
 def collect_paths(paths: list[Path]) -> list[Path]:
-    """Expand directories into their ``*.ply`` / ``*.pcd`` files (sorted)."""
+    """Expand directories into their ``*.ply`` / ``*.pcd`` / ``*.zip`` files, RGB-D frame
+    folders and dataset sequences (sorted); a frame folder or a sequence stands for itself."""
     out: list[Path] = []
     for path in paths:
-        if path.is_dir():
-            out += sorted(p for p in path.iterdir() if p.suffix.lower() in _SUFFIXES)
+        if path.is_dir() and not _is_input_dir(path):
+            out += sorted(
+                p
+                for p in path.iterdir()
+                if p.suffix.lower() in _SUFFIXES or (p.is_dir() and _is_input_dir(p))
+            )
         else:
             out.append(path)
     return out
 
 
-def read_fragments(paths: list[Path], params: PipelineParams) -> dict[str, FloatArray]:
-    """Parse every file; report unusable ones on stderr as ``file: reason`` and skip them."""
-    clouds: dict[str, FloatArray] = {}
+def _decode(path: Path, params: PipelineParams) -> Iterator[tuple[str, Fragment | Exception]]:
+    """(fragment id, fragment or the error) for each fragment a path holds."""
+    try:
+        if path.is_dir() and is_dataset(path):
+            yield from dataset_frames(path, params)
+        elif path.is_dir():
+            yield path.name, read_frame_dir(path, params)
+        elif path.suffix.lower() == ".zip":
+            yield path.stem, read_frame_zip(path, params)
+        else:
+            yield path.stem, parse_fragment(path.read_bytes(), params.parser)
+    except (OSError, JigsawError) as exc:
+        yield path.stem, exc
+
+
+def read_fragments(paths: list[Path], params: PipelineParams) -> dict[str, Fragment]:
+    """Decode every input (clouds, frames, frame zips, sequences); report unusable ones on
+    stderr as ``file: reason`` and skip them."""
+    fragments: dict[str, Fragment] = {}
     for path in collect_paths(paths):
-        try:
-            data = path.read_bytes()
-            parsed = parse_fragment(data, params.parser)
-        except OSError as exc:
-            print(f"{path}: cannot read: {exc.strerror or exc}", file=sys.stderr)
-            continue
-        except JigsawError as exc:
-            print(f"{path}: {exc.message}", file=sys.stderr)
-            continue
-        if path.stem in clouds:
-            print(f"{path}: duplicate fragment id {path.stem!r}, skipped", file=sys.stderr)
-            continue
-        if parsed.dropped_nonfinite:
-            print(f"{path}: dropped {parsed.dropped_nonfinite} non-finite points", file=sys.stderr)
-        clouds[path.stem] = parsed.points
-    return clouds
+        for fid, found in _decode(path, params):
+            where = path if fid in (path.stem, path.name) else path / fid
+            if isinstance(found, OSError):
+                print(f"{where}: cannot read: {found.strerror or found}", file=sys.stderr)
+            elif isinstance(found, JigsawError):
+                print(f"{where}: {found.message}", file=sys.stderr)
+            elif isinstance(found, Exception):
+                print(f"{where}: {type(found).__name__}: {found}", file=sys.stderr)
+            elif fid in fragments:
+                print(f"{where}: duplicate fragment id {fid!r}, skipped", file=sys.stderr)
+            else:
+                dropped = dropped_count(found)
+                if dropped:
+                    print(f"{where}: dropped {dropped} non-finite points", file=sys.stderr)
+                fragments[fid] = found
+    return fragments
+
+
+def fragment_clouds(
+    fragments: Mapping[str, Fragment], params: PipelineParams
+) -> dict[str, FloatArray]:
+    """Each fragment's points in its local frame (a frame's back-projected)."""
+    return {fid: fragment_points(f, params) for fid, f in fragments.items()}
 
 
 @contextmanager
@@ -84,13 +123,30 @@ def _progress() -> Iterator[Progress]:
         yield bar
 
 
-def _layouts(clouds: dict[str, FloatArray], params: PipelineParams) -> dict[str, LocalLayout]:
+def _frame_groups(fragments: Mapping[str, Fragment], params: PipelineParams) -> list[FrameGroup]:
+    """Overlapping RGB-D frames merged by ORB matching (groups of one for the rest)."""
+    frames = {fid: f for fid, f in fragments.items() if isinstance(f, RgbdFrame)}
+    if len(frames) < 2:
+        return [FrameGroup(fid, {fid: np.eye(4)}) for fid in frames]
+    return group_frames(frames, params.layout.frame)
+
+
+def _layouts(
+    fragments: Mapping[str, Fragment], groups: list[FrameGroup], params: PipelineParams
+) -> dict[str, LocalLayout]:
+    members = {fid for group in groups for fid in group.transforms}
+    anchors = {group.anchor_id: group for group in groups}
+    frames = {fid: f for fid, f in fragments.items() if isinstance(f, RgbdFrame)}
+    todo = [fid for fid in fragments if fid not in members or fid in anchors]
     layouts: dict[str, LocalLayout] = {}
     with _progress() as bar:
-        task = bar.add_task("local layouts", total=len(clouds))
-        for fid, points in clouds.items():
+        task = bar.add_task("local layouts", total=len(todo))
+        for fid in todo:
             bar.update(task, description=f"local layout {fid}")
-            layouts[fid] = estimate_layout(points, params)
+            if fid in anchors:
+                layouts[fid] = group_layout(anchors[fid], frames, params)
+            else:
+                layouts[fid] = fragment_layout(fragments[fid], params)
             bar.advance(task)
     return layouts
 
@@ -107,11 +163,11 @@ def _write_json(payload: dict[str, Any], output: Path | None) -> None:
 def run_layout(paths: list[Path], output: Path | None, params: PipelineParams | None = None) -> int:
     """``jigsaw layout``: local layouts of all usable fragments as JSON. Returns the exit code."""
     params = params or PipelineParams()
-    clouds = read_fragments(paths, params)
-    if not clouds:
+    inputs = read_fragments(paths, params)
+    if not inputs:
         print("error: no usable fragment", file=sys.stderr)
         return EXIT_NO_INPUT
-    layouts = _layouts(clouds, params)
+    layouts = {fid: fragment_layout(f, params) for fid, f in inputs.items()}
     fragments = [
         {
             "id": fid,
@@ -142,16 +198,18 @@ class AlignRun:
 
 
 def align_fragments(
-    clouds: dict[str, FloatArray], params: PipelineParams, hints: HintsModel | None = None
+    fragments: Mapping[str, Fragment], params: PipelineParams, hints: HintsModel | None = None
 ) -> AlignRun:
-    """Local layouts of all clouds, then the global placement (with ``hints``, if any);
-    timed per stage.
+    """Local layouts of all fragments (overlapping RGB-D frames merged first, by ORB
+    matching), then the global placement (with ``hints``, if any); timed per stage.
 
-    The stages of :func:`services.pipeline.align_clouds` without the pre-merge, keeping the
-    layouts (for pictures) and the time of each stage.
+    The stages of :func:`services.pipeline.align_clouds` without the FPFH pre-merge, keeping
+    the layouts (for pictures) and the time of each stage. Frames merged into a group take
+    the group's placement (``merged_into`` names its anchor).
     """
     start = perf_counter()
-    layouts = _layouts(clouds, params)
+    groups = _frame_groups(fragments, params)
+    layouts = _layouts(fragments, groups, params)
     middle = perf_counter()
     marks: dict[str, float] = {}
 
@@ -159,6 +217,8 @@ def align_fragments(
         marks.setdefault(stage, perf_counter())
 
     result = place_site(layouts, params, mark, hints=hints)
+    if any(len(group.transforms) > 1 for group in groups):
+        result = expand_frame_groups(result, groups, list(fragments))
     end = perf_counter()
     seconds = {"local_layout": middle - start, "global": end - middle}
     if "placement" in marks and "refinement" in marks:
@@ -221,15 +281,16 @@ def run_align(
     if problems:
         print("\n".join(problems), file=sys.stderr)
         return EXIT_NO_INPUT
-    clouds = read_fragments(paths, params)
-    if not clouds:
+    fragments = read_fragments(paths, params)
+    if not fragments:
         print("error: no usable fragment", file=sys.stderr)
         return EXIT_NO_INPUT
+    clouds = fragment_clouds(fragments, params)
     try:
-        if premerge:
+        if premerge and not any(isinstance(f, RgbdFrame) for f in fragments.values()):
             result = align_clouds(clouds, params, premerge_overlapping=True, hints=hints)
         else:
-            result = align_fragments(clouds, params, hints).result
+            result = align_fragments(fragments, params, hints).result
     except Exception as exc:  # an internal failure must still end with a message and code 1
         print(f"internal error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return EXIT_INTERNAL
@@ -241,6 +302,6 @@ def run_align(
         return EXIT_INTERNAL
     for note in notes:
         print(note, file=sys.stderr)
-    skipped = len(collect_paths(paths)) - len(clouds)
+    skipped = max(len(collect_paths(paths)) - len(fragments), 0)
     print(_summary(result, skipped, output, exports, notes), file=sys.stderr)
     return EXIT_OK

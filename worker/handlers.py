@@ -73,12 +73,13 @@ def _expect(job: LayoutJob | PlacementJob, kind: type[_J]) -> _J:
 
 
 class LayoutHandler:
-    """Parse the stored bytes and estimate the fragment's local layout."""
+    """Decode the stored bytes (a cloud or an RGB-D frame) and estimate the fragment's
+    local layout."""
 
     def run(self, ctx: JobContext, job: LayoutJob | PlacementJob) -> JobReport:
         job = _expect(job, LayoutJob)
-        from services.parsing import parse_fragment
-        from services.pipeline import estimate_layout
+        from api.frames import decode_upload
+        from services.fragments import fragment_layout, reading_count
 
         site, fid, sha = job.site_id, job.fragment_id, job.sha256
         record = ctx.client.hgetall(ctx.keys.fragment(site, fid))
@@ -93,16 +94,16 @@ class LayoutHandler:
         blob = ctx.raw.get(ctx.keys.fragment_data(site, fid))
         if not isinstance(blob, bytes):
             return {"outcome": "stale"}
-        parsed = parse_fragment(zlib.decompress(blob), ctx.params.parser)
+        parsed = decode_upload(zlib.decompress(blob), ctx.params)
         progress = Progress(ctx, site, (fid, sha))
-        layout = estimate_layout(parsed.points, ctx.params, progress=progress)
+        layout = fragment_layout(parsed, ctx.params, progress=progress)
         wire = LocalLayoutWire.from_layout(layout).model_dump_json()
         done = {"state": FragmentState.DONE.value, "stage": "done", "progress": "1"}
         done.update(error_fields("", ""))
         update_fragment(ctx, site, fid, sha, done, layout=wire, place=True)
         return {
             "outcome": "done",
-            "points": len(parsed.points),
+            "points": reading_count(parsed, ctx.params),
             "keypoints": len(layout.keypoints),
         }
 
