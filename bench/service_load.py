@@ -30,6 +30,7 @@ import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
@@ -211,14 +212,20 @@ def job_metrics(url: str) -> dict[str, float]:
 def _breakdown(url: str, site: str, last_upload: float, seen: float) -> dict[str, float]:
     """Where the time from the last upload to the result went (server clock = this clock)."""
     status = httpx.get(f"{url}/v1/sites/{site}", timeout=10).json()
-    layouts_done = max(f["updated_at"] for f in status["fragments"])
+    layouts_done = max(_epoch(f["updated_at"]) for f in status["fragments"])
     placement = status["placement"]
+    started, placed = _epoch(placement["started_at"]), _epoch(placement["last_placement_at"])
     return {
         "layouts_s": layouts_done - last_upload,
-        "wait_for_placement_s": placement["started_at"] - layouts_done,
-        "placement_s": placement["last_placement_at"] - placement["started_at"],
-        "result_to_client_s": seen - placement["last_placement_at"],
+        "wait_for_placement_s": started - layouts_done,
+        "placement_s": placed - started,
+        "result_to_client_s": seen - placed,
     }
+
+
+def _epoch(stamp: str) -> float:
+    """Unix seconds of the site status's ISO 8601 times."""
+    return datetime.fromisoformat(stamp).timestamp()
 
 
 def run_latency(service: Service, fragments: dict[str, bytes], robots: int) -> dict[str, Any]:
