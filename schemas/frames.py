@@ -51,7 +51,24 @@ class FrameParams(BaseModel):
     min_depth: float = Field(0.1, gt=0, description="readings nearer than this are dropped, m")
     max_depth: float = Field(10.0, gt=0, description="readings farther than this are dropped, m")
     stride: int = Field(
-        4, ge=1, le=16, description="every stride-th pixel of each row and column is used"
+        4,
+        ge=1,
+        le=16,
+        description="largest pixel stride over rows and columns (smaller for wide-angle or "
+        "small images, so points stay about 3 cm apart at 4 m)",
+    )
+    camera_height: float = Field(
+        1.3,
+        gt=0,
+        description="camera height over the floor assumed when a frame shows too "
+        "little floor to measure it, m",
+    )
+    min_floor_share: float = Field(
+        0.03,
+        ge=0,
+        le=1,
+        description="share of a frame's thinned points that must lie on the "
+        "floor plane for its height to be measured",
     )
     max_pixels: int = Field(
         16_777_216, ge=1, description="largest depth image (width x height) decoded"

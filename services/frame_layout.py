@@ -27,6 +27,12 @@ from services.types import FloatArray, LocalLayout, ManhattanFrame, ProgressFn
 from services.wall_graph import find_wall_chain
 from services.wall_lines import find_wall_lines
 
+_FLAT_COS = float(np.cos(np.radians(10.0)))  # a normal this close to +z: horizontal surface
+_SPACING = 0.03  # m, largest spacing of a frame's points at 4 m (sets the pixel stride)
+_FLOOR_BAND = 0.05  # m, points this close to the floor height lie on the floor
+_MIN_FLOOR_POINTS = 50
+_MIN_HEIGHT, _MAX_HEIGHT = 0.2, 2.5  # m, camera heights over a floor that can be one
+
 __all__ = ["FrameCamera", "estimate_frame_layout", "estimate_rgbd_layout", "frame_points"]
 
 
@@ -43,15 +49,31 @@ class FrameCamera:
 
 
 def frame_points(frame: RgbdFrame, params: PipelineParams = PipelineParams()) -> FloatArray:
-    """(N, 3) float64 points of a frame for its layout: every ``stride``-th pixel in the
-    depth range, optical frame, meters."""
-    points, _ = backproject(frame, params.layout.frame, params.layout.frame.stride)
+    """(N, 3) float64 points of a frame for its layout: every k-th pixel in the depth range,
+    optical frame, meters; k is at most ``stride`` and keeps neighbouring points at most
+    about 3 cm apart at 4 m (a wide-angle or small image is used whole)."""
+    k = frame.intrinsics
+    step = int(np.clip(min(k.fx, k.fy) * _SPACING / 4.0, 1, params.layout.frame.stride))
+    points, _ = backproject(frame, params.layout.frame, step)
     return points
 
 
 def _unit(v: FloatArray) -> FloatArray:
     norm = float(np.linalg.norm(v))
     return v / norm if norm > 0 else v
+
+
+def _floor(
+    aligned: FloatArray, normals: FloatArray, floor_z: float, params: PipelineParams
+) -> float:
+    """The measured floor height (aligned frame, camera at 0) when the frame shows enough
+    floor below the camera, else the assumed camera height below it."""
+    frame = params.layout.frame
+    on_floor = (normals[:, 2] > _FLAT_COS) & (np.abs(aligned[:, 2] - floor_z) < _FLOOR_BAND)
+    least = max(_MIN_FLOOR_POINTS, frame.min_floor_share * len(aligned))
+    if np.count_nonzero(on_floor) >= least and -_MAX_HEIGHT < floor_z < -_MIN_HEIGHT:
+        return floor_z
+    return -frame.camera_height
 
 
 def estimate_frame_layout(
@@ -82,15 +104,15 @@ def estimate_frame_layout(
     report("manhattan", 0.0)
     cloud = thin_with_normals(points @ OPTICAL_TO_LEVEL.T, params.manhattan)
     levelled = estimate_manhattan_frame(cloud, params.manhattan)
+    aligned = cloud.points @ levelled.rotation.T
+    normals = cloud.normals @ levelled.rotation.T
     frame = ManhattanFrame(
         rotation=levelled.rotation @ OPTICAL_TO_LEVEL,
-        floor_z=levelled.floor_z,
+        floor_z=_floor(aligned, normals, levelled.floor_z, params),
         ceiling_z=levelled.ceiling_z,
         n_planes=levelled.n_planes,
         wall_support=levelled.wall_support,
     )
-    aligned = cloud.points @ levelled.rotation.T
-    normals = cloud.normals @ levelled.rotation.T
     views = [
         CameraView.from_intrinsics(
             camera.intrinsics,

@@ -78,7 +78,8 @@ class FrameSpec:
     n_stations: stations the frames are taken from; gap_range: unseen wall between one
     frame's stretch and the next along the loop, m (negative: overlap).
     max_range: readings farther than this are lost, m (the stations keep every wall of a
-    frame within it). noise: Kinect-like depth noise and dropouts.
+    frame within it). min_distance: least distance from a station to any wall, and from the
+    camera to the walls it views, m. noise: Kinect-like depth noise and dropouts.
     """
 
     n_corners_range: tuple[int, int] = (4, 8)
@@ -92,6 +93,7 @@ class FrameSpec:
     n_stations: tuple[int, int] = (1, 3)
     gap_range: tuple[float, float] = (-0.3, 0.2)
     max_range: float = 7.0
+    min_distance: float = 1.2
     noise: bool = True
     dropout: float = 0.01
     furniture: bool = True
@@ -168,8 +170,9 @@ def _wall_boxes(room: Room, furnishing: Furnishing) -> list[tuple[FloatArray, Fl
     n = room.n_edges
     for e in range(n):
         d, normal, length = room.dirs[e], room.normals[e], float(room.lengths[e])
-        convex_before = np.cross(room.dirs[e - 1], d) > 0
-        convex_after = np.cross(d, room.dirs[(e + 1) % n]) > 0
+        before, after = room.dirs[e - 1], room.dirs[(e + 1) % n]
+        convex_before = before[0] * d[1] - before[1] * d[0] > 0
+        convex_after = d[0] * after[1] - d[1] * after[0] > 0
         t_lo = -thick if convex_before else 0.0
         t_hi = length + thick if convex_after else length
         holes = [o for o in furnishing.openings if o.edge == e]
@@ -354,7 +357,7 @@ def _views(room: Room, stations: FloatArray, spec: FrameSpec) -> list[_View]:
         for yaw in yaws:
             angles = yaw + np.linspace(-half, half, 25)
             distance, arc = _ray_hits(room, station, angles)
-            if not np.all(distance < spec.max_range - 0.5) or np.min(distance) < 0.6:
+            if np.max(distance) > spec.max_range - 0.5 or np.min(distance) < spec.min_distance:
                 continue
             start, end = arc[0], arc[-1]
             length = float(np.mod(end - start, room.perimeter))
@@ -406,15 +409,15 @@ def _tile_loop(
 
 
 def _stations(
-    rng: np.random.Generator, room: Room, boxes: tuple[Box, ...], count: int
+    rng: np.random.Generator, room: Room, boxes: tuple[Box, ...], count: int, clearance: float
 ) -> FloatArray:
-    """Station positions (x, y) at least 0.8 m from walls and 0.4 m from furniture."""
+    """Station positions (x, y) at least ``clearance`` from walls, 0.4 m from furniture."""
     lo, hi = room.polygon.min(axis=0), room.polygon.max(axis=0)
     found: list[FloatArray] = []
     for _ in range(400):
         p = rng.uniform(lo, hi)
         inside = points_in_polygon(p[None], room.polygon)[0]
-        if not inside or nearest_boundary(p[None], room)[0][0] < 0.8:
+        if not inside or nearest_boundary(p[None], room)[0][0] < clearance:
             continue
         if any(np.all(p > b.lo[:2] - 0.4) and np.all(p < b.hi[:2] + 0.4) for b in boxes):
             continue
@@ -473,7 +476,7 @@ def generate_frame_scene(
             clearance=0.0,
         )
         count = int(rng.integers(spec.n_stations[0], spec.n_stations[1] + 1))
-        stations = _stations(rng, room, furnishing.boxes, count)
+        stations = _stations(rng, room, furnishing.boxes, count, spec.min_distance)
         tiling = _tile_loop(rng, room, _views(room, stations, spec), spec)
         if tiling is not None:
             return _render_scene(rng, spec, seed, room, furnishing, stations, tiling)

@@ -1,0 +1,50 @@
+"""Shared RGB-D frame scenes for the tests: an empty rectangular room seen by a wide-angle
+camera from one station in three frames (each frame's layout is reliable, and three close
+the loop), and helpers to zip a frame as an upload."""
+
+from __future__ import annotations
+
+import io
+import zipfile
+from functools import cache
+
+from schemas.frames import IntrinsicsModel
+from services.rgbd import RgbdFrame, encode_frame_files
+from services.synthetic.render import FrameScene, FrameSpec, generate_frame_scene
+
+WIDE = IntrinsicsModel(width=640, height=480, fx=190.0, fy=190.0, cx=319.5, cy=239.5)
+THREE_FRAMES = FrameSpec(
+    n_corners_range=(4, 4),
+    size_range=((4.0, 4.5), (5.0, 5.5)),
+    intrinsics=WIDE,
+    furniture=False,
+    openings=False,
+    n_stations=(1, 1),
+    pitch_deg=(-10.0, -5.0),
+)
+CLOSING_SEEDS = (0, 4, 5)  # seeds of THREE_FRAMES whose three frames close the loop
+
+
+@cache
+def three_frames(seed: int = 0) -> FrameScene:
+    """A room and its three wide-angle frames (cached: rendering takes a second)."""
+    return generate_frame_scene(THREE_FRAMES, seed)
+
+
+def frame_files(frame: RgbdFrame, color_format: str = "png") -> dict[str, bytes]:
+    """The frame's files (depth.png, intrinsics.json, color.png or .jpg) as bytes."""
+    return encode_frame_files(frame.depth, frame.intrinsics, frame.color, color_format)
+
+
+def zip_files(files: dict[str, bytes], folder: str = "") -> bytes:
+    """A zip archive of ``files`` (name -> bytes), optionally inside one folder."""
+    out = io.BytesIO()
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as archive:
+        for name, data in files.items():
+            archive.writestr(f"{folder}{name}", data)
+    return out.getvalue()
+
+
+def frame_zip(frame: RgbdFrame) -> bytes:
+    """A frame as the zip archive an upload carries."""
+    return zip_files(frame_files(frame))

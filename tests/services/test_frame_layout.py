@@ -1,0 +1,73 @@
+"""Local layout of RGB-D frames: levelled from the optical frame, chain ends from the
+frustum, poses that map the frame's own points; timing of a 640x480 frame."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from services.evaluation import evaluate_result, keypoint_error
+from services.frame_layout import estimate_rgbd_layout, frame_points
+from services.frustum import CameraView, in_any_view, visible_band
+from services.pipeline import place_site
+from services.synthetic.render import FrameSpec, frame_ground_truth_json, generate_frame_scene
+from tests.frame_fixtures import WIDE, three_frames
+
+pytestmark = pytest.mark.timeout(60)
+
+
+def test_frames_layouts_match_the_truth_and_their_up_axis_is_minus_y() -> None:
+    scene = three_frames(0)
+    for f in scene.frames:
+        layout = estimate_rgbd_layout(f.frame)
+        assert layout.ok
+        # Up in the optical frame is about -y; the rotation maps optical -> aligned.
+        up = layout.frame.rotation[2]
+        truth_up = f.pose[:3, :3].T @ np.array([0.0, 0.0, 1.0])
+        assert np.degrees(np.arccos(np.clip(up @ truth_up, -1, 1))) < 1.0
+        error = keypoint_error(layout.keypoints_local(), f.keypoints_local)
+        assert error < 0.05 * f.diagonal, (f.id, error)
+
+
+def test_three_frames_close_the_room_with_poses_of_their_own_points() -> None:
+    scene = three_frames(0)
+    layouts = {f.id: estimate_rgbd_layout(f.frame) for f in scene.frames}
+    result = place_site(layouts)
+    assert result.status == "closed"
+    report = evaluate_result(result.model_dump(mode="json"), frame_ground_truth_json(scene))
+    assert report.global_correct
+    assert all(e.rotation_deg < 2.0 for e in report.pose_errors.values())
+    assert all(e.translation_pct < 5.0 for e in report.pose_errors.values())
+
+
+def test_a_kinect_frame_is_laid_out_fast() -> None:
+    scene = generate_frame_scene(FrameSpec(), 3)
+    frame = scene.frames[0].frame
+    assert frame.shape == (480, 640)
+    estimate_rgbd_layout(frame)  # warm up (imports, allocations)
+    seconds = []
+    for _ in range(3):
+        start = time.perf_counter()
+        estimate_rgbd_layout(frame)
+        seconds.append(time.perf_counter() - start)
+    assert min(seconds) < 0.2  # bench/rgbd_frames.py measures the target of 0.1 s
+
+
+def test_frustum_band_and_field_of_view() -> None:
+    level = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # optical -> z up, looking +y
+    view = CameraView.from_intrinsics(WIDE, level, np.zeros(3))
+    np.testing.assert_allclose(view.forward, [0.0, 1.0], atol=1e-9)
+    inside = in_any_view([view], np.array([[0.0, 3.0], [0.0, -3.0], [100.0, 1.0]]))
+    assert inside.tolist() == [True, False, False]
+    low, high = visible_band([view], np.array([[0.0, 2.0]]))
+    assert high[0] == pytest.approx(2.0 * 240 / 190, rel=1e-3)
+    assert low[0] == pytest.approx(-2.0 * 240 / 190, rel=1e-3)
+    assert np.isnan(visible_band([], np.zeros((1, 2)))[0][0])
+
+
+def test_frame_points_keep_a_wide_angle_image_whole() -> None:
+    frame = three_frames(0).frames[0].frame
+    points = frame_points(frame)
+    assert len(points) > 0.5 * frame.depth.size  # stride 1 at f = 190 px

@@ -1,0 +1,66 @@
+"""Merging overlapping frames: ORB matches verified by a rigid fit on their depths."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import open3d as o3d
+import pytest
+
+from schemas.frames import FrameParams
+from services.frame_merge import frame_features, group_frames, group_layout, match_frames
+from services.rgbd import RgbdFrame
+from services.synthetic.furniture import Furnishing
+from services.synthetic.render import KINECT, _camera_pose, render_frame, scene_mesh
+from services.synthetic.room import Room
+
+pytestmark = pytest.mark.timeout(60)
+
+
+@pytest.fixture(scope="module")
+def views() -> dict[str, tuple[RgbdFrame, np.ndarray]]:
+    """Frames of one room from one station: a and b overlap (20 degrees apart), c looks away."""
+    room = Room.from_polygon(np.array([[0.0, 0], [5, 0], [5, 4], [0, 4]]), 2.6)
+    vertices, triangles, material = scene_mesh(room, Furnishing())
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor.from_numpy(vertices), o3d.core.Tensor.from_numpy(triangles))
+    out = {}
+    for name, yaw in (("a", 90.0), ("b", 110.0), ("c", 270.0)):
+        pose = _camera_pose(np.array([2.5, 1.5, 1.3]), math.radians(yaw), -0.2, 0.0)
+        render = render_frame(scene, material, pose, KINECT, 7.0)
+        out[name] = (RgbdFrame(render.depth, KINECT, render.color), pose)
+    return out
+
+
+def test_overlapping_frames_merge_with_the_true_motion(views) -> None:
+    (a, pose_a), (b, pose_b) = views["a"], views["b"]
+    found = match_frames(frame_features(a), frame_features(b))
+    assert found.merged and found.transform is not None
+    truth = np.linalg.inv(pose_a) @ pose_b  # b's optical frame -> a's
+    assert np.linalg.norm(found.transform[:3, 3] - truth[:3, 3]) < 0.05
+    assert np.abs(found.transform[:3, :3] - truth[:3, :3]).max() < 0.02
+    groups = group_frames({"a": a, "b": b, "c": views["c"][0]})
+    assert [sorted(g.transforms) for g in groups] == [["a", "b"], ["c"]]
+    layout = group_layout(groups[0], {"a": a, "b": b})
+    assert layout.ok
+
+
+def test_frames_looking_away_do_not_merge(views) -> None:
+    found = match_frames(frame_features(views["a"][0]), frame_features(views["c"][0]))
+    assert not found.merged
+
+
+def test_matches_whose_depths_disagree_are_refused(views) -> None:
+    (a, _), (b, _) = views["a"], views["b"]
+    ramp = np.linspace(0.6, 1.6, b.depth.shape[1])[None, :].astype(np.float32)
+    warped = RgbdFrame(b.depth * ramp, b.intrinsics, b.color)
+    strict = FrameParams(inlier_distance=0.02)
+    found = match_frames(frame_features(a, strict), frame_features(warped, strict), strict)
+    assert found.matches >= strict.min_matches  # the images still match...
+    assert not found.merged  # ...but no rigid motion explains their depths
+
+
+def test_frames_without_colour_have_no_features(views) -> None:
+    a = views["a"][0]
+    assert len(frame_features(RgbdFrame(a.depth, a.intrinsics)).points) == 0
