@@ -12,28 +12,32 @@ from services.wall_lines import find_wall_lines
 
 __all__ = ["boundary_points", "estimate_local_layout", "footprint_cells"]
 
-_MAX_BOUNDARY_POINTS = 2000
+_MAX_BOUNDARY_POINTS = 4000
 _FOOTPRINT_CELL = 0.25  # m
 _FOOTPRINT_MIN_POINTS = 4
 
 
 def boundary_points(
-    aligned: FloatArray, end: FloatArray, wall_direction: FloatArray, band: float
+    aligned: FloatArray, end: FloatArray, inward: FloatArray, band: float, depth: float
 ) -> FloatArray:
-    """Points within ``band`` of the vertical cutting plane through a chain end.
+    """Points of the end region at one chain end.
 
-    The plane is perpendicular to the end wall. At most 2000 points are kept, evenly
-    strided, so every fragment contributes alike to the boundary similarity.
+    The region runs from ``band`` beyond the cutting plane through the end (the vertical
+    plane perpendicular to the end wall) to ``depth`` inside the chain, across the whole
+    scan: wall, floor, ceiling and whatever stands there. Neighbouring scans share what
+    crosses their cut (furniture, door jambs), what one saw past its end and, where they
+    overlap, the whole overlap. At most 4000 points are kept, evenly strided.
 
     Parameters
     ----------
     aligned : (M, 3) float64, fragment points, aligned frame.
     end : (2,) the source or target keypoint.
-    wall_direction : (2,) unit direction of the wall that ends there.
-    band : half-width of the band, meters.
+    inward : (2,) unit vector along the end wall, pointing from the end into the chain.
+    band : reach beyond the end, meters (the paper's boundary band).
+    depth : reach into the chain, meters.
     """
-    distance = (aligned[:, :2] - end) @ wall_direction
-    near = aligned[np.abs(distance) < band]
+    distance = (aligned[:, :2] - end) @ inward
+    near = aligned[(distance > -band) & (distance < depth)]
     stride = max(1, int(np.ceil(len(near) / _MAX_BOUNDARY_POINTS)))
     return near[::stride].copy()
 
@@ -98,12 +102,12 @@ def estimate_local_layout(
             keypoints=np.zeros((0, 2)), frame=frame, footprint=footprint_cells(aligned)
         )
     kp = chain.keypoints
-    band = params.layout.boundary_band
+    band, depth = params.layout.end_region_beyond, params.layout.end_region_depth
     layout = LocalLayout(
         keypoints=kp,
         frame=frame,
-        source_boundary=boundary_points(aligned, kp[0], _unit(kp[1] - kp[0]), band),
-        target_boundary=boundary_points(aligned, kp[-1], _unit(kp[-1] - kp[-2]), band),
+        source_boundary=boundary_points(aligned, kp[0], _unit(kp[1] - kp[0]), band, depth),
+        target_boundary=boundary_points(aligned, kp[-1], _unit(kp[-2] - kp[-1]), band, depth),
         footprint=footprint_cells(aligned),
     )
     report("done", 1.0)

@@ -72,12 +72,14 @@ def test_floor_only_fragment_has_no_walls():
     assert len(layout.footprint) > 0
 
 
-def test_boundary_points_are_within_the_band_and_capped():
+def test_end_region_reaches_past_the_end_and_into_the_chain_and_is_capped():
     rng = np.random.default_rng(0)
     pts = np.column_stack([rng.uniform(-2, 2, 50_000), rng.uniform(0, 3, 50_000), np.zeros(50_000)])
-    band = boundary_points(pts, np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.1)
-    assert np.all(np.abs(band[:, 0]) < 0.1)
-    assert 0 < len(band) <= 2000
+    # The chain runs towards +x from the end at the origin: 0.2 m past it, 0.5 m into it.
+    region = boundary_points(pts, np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.2, 0.5)
+    assert np.all((region[:, 0] > -0.2) & (region[:, 0] < 0.5))
+    assert region[:, 0].min() < -0.15 and region[:, 0].max() > 0.45
+    assert 0 < len(region) <= 4000
 
 
 def test_footprint_ignores_isolated_outliers():
