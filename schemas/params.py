@@ -56,6 +56,14 @@ class LayoutParams(_Frozen):
     )
     complexity_penalty: float = Field(0.1, ge=0, description="lambda in the edge weight")
     boundary_band: float = Field(0.10, gt=0, description="half-width of the boundary band, m")
+    end_region_depth: float = Field(
+        1.0,
+        gt=0,
+        description="how far into the chain the end regions kept for junction evidence reach, m",
+    )
+    end_region_beyond: float = Field(
+        1.0, gt=0, description="and how far past the chain's end (what the scan saw there), m"
+    )
     min_wall_cells: int = Field(3, ge=1, description="shortest candidate wall segment, cells")
     frame: FrameParams = Field(
         default_factory=FrameParams,
@@ -70,22 +78,45 @@ class LayoutParams(_Frozen):
 
 
 class PlacementParams(_Frozen):
-    """Global placement energy and search (paper 3.2)."""
+    """Global placement energy, search and confidence (paper 3.2, extended).
 
-    use_complexity: bool = True
-    use_closure: bool = True
-    use_boundary: bool = True
+    The energy is a weighted sum of features (``services.placement.energy``); the weights
+    are fitted on the project's benchmark so that the Boltzmann distribution over the
+    assemblies found gives calibrated probabilities (``bench/tune_placement.py``).
+    """
+
+    use_complexity: bool = Field(True, description="the paper's E_l: junction corners, hull")
+    use_closure: bool = Field(True, description="the paper's E_c, as a likelihood")
+    use_boundary: bool = Field(True, description="the paper's E_b boundary mismatch")
+    use_structure: bool = Field(True, description="structure seen on both sides of a cut")
     use_free_space: bool = Field(
-        True, description="penalise scanned space that a placement puts outside the room"
+        True, description="penalise walls through space another scan saw empty"
     )
-    free_space_weight: float = Field(
-        10.0, ge=0, description="energy per fragment lying wholly outside the room"
+    weight_turn: float = Field(0.728, ge=0, description="energy per junction that turns")
+    weight_hull: float = Field(0.574, ge=0, description="energy per convex-hull edge")
+    weight_closure: float = Field(0.28, ge=0, description="weight of the closure likelihood")
+    weight_structure: float = Field(2.01, ge=0, description="weight of the structure evidence")
+    weight_boundary: float = Field(2.604, ge=0, description="weight of the boundary mismatch")
+    weight_conflict: float = Field(
+        0.804, ge=0, description="energy per meter of wall through another scan's seen space"
     )
-    free_space_margin: float = Field(
-        0.3, ge=0, description="footprint cells this close outside a wall still count inside, m"
+    junction_mean: float = Field(
+        0.0, description="mean hidden displacement along the wall at a junction (overlap < 0), m"
     )
+    junction_sigma: float = Field(
+        0.3, gt=0, description="its spread (root mean square about the mean), m"
+    )
+    hidden_corner_mean: float = Field(
+        0.0, ge=0, description="mean unseen wall on each side of a corner hidden in a cut, m"
+    )
+    hidden_corner_sigma: float = Field(0.3, gt=0, description="its spread, m")
+    keypoint_sigma: float = Field(0.05, gt=0, description="noise of a chain end's position, m")
+    boundary_band: float = Field(0.10, gt=0, description="paper's boundary band, m")
     boundary_sigma: float = Field(0.10, gt=0, description="sigma of the mismatch CDF, m")
     min_boundary_points: int = Field(50, ge=1)
+    hint_pair_cost: float = Field(
+        6.0, ge=0, description="energy per known neighbour pair or order step an assembly breaks"
+    )
     max_closure_share: float = Field(
         0.05,
         gt=0,
@@ -102,12 +133,59 @@ class PlacementParams(_Frozen):
     closure_tolerance: float = Field(
         0.05, gt=0, description="largest gap left in the loop after refinement, m"
     )
-    top_k: int = Field(3, ge=1, description="best placements kept (runners-up in diagnostics)")
-    max_search_seconds: float = Field(
-        4.0, gt=0, description="search time before the best found so far is returned, s"
+    top_k: int = Field(24, ge=1, description="assemblies kept by the search")
+    energy_window: float = Field(
+        6.0,
+        gt=0,
+        description="assemblies whose energy exceeds the best's by more are not kept (they "
+        "are e^6 = 400 times less likely): the search prunes at that bound",
+    )
+    beam_width: int = Field(
+        300,
+        ge=0,
+        description="partial loops a first, breadth-first pass keeps per loop position (0: none)",
     )
     max_search_nodes: int = Field(
-        100_000, ge=1, description="search nodes before the best found so far is returned"
+        20_000,
+        ge=1,
+        description="search nodes before the best found so far is returned (a count, not a "
+        "time: the same input gives the same answer on any machine)",
+    )
+    max_open_nodes: int = Field(
+        2_000, ge=1, description="search nodes of the fallback search for an open chain"
+    )
+    unexplored_energy: float = Field(
+        4.271,
+        description="energy above the best of the 'none of these' alternative (local layouts "
+        "wrong, truth not found) in the confidence",
+    )
+    unexplored_per_piece: float = Field(
+        -0.53, description="change of that energy per piece (more pieces, more to go wrong)"
+    )
+    confidence_coefficients: tuple[float, ...] = Field(
+        (1.402, 1.636, 0.153, -0.041, -0.437, -0.701, 1.016),
+        min_length=7,
+        max_length=7,
+        description="logistic calibration of the main room's probability over "
+        "(bias, logit of its Boltzmann share, pieces, its closure term, its free-space "
+        "conflict, its hidden corners, search truncated); (0, 1, 0, ...) is the share itself",
+    )
+    closed_confidence: float = Field(
+        0.9,
+        gt=0,
+        le=1,
+        description="confidence at or above which a closed loop is reported 'closed'; below "
+        "it, 'ambiguous' with the alternatives",
+    )
+    max_alternatives: int = Field(3, ge=1, description="alternatives reported at most")
+    min_alternative_probability: float = Field(
+        0.005, ge=0, le=1, description="alternatives less probable than this are not reported"
+    )
+    same_room_share: float = Field(
+        0.025,
+        gt=0,
+        description="two assemblies whose floorplans differ by less than this share of the "
+        "room diagonal (mean keypoint distance) are one answer",
     )
 
 

@@ -8,6 +8,7 @@ and the contract's result.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -15,15 +16,29 @@ import numpy as np
 from schemas.hints import HintsModel
 from schemas.params import PipelineParams
 from schemas.result import (
+    AlternativeFragmentModel,
+    AlternativeModel,
     FloorplanModel,
     FragmentResultModel,
     LocalLayoutModel,
     ResultModel,
     RoomModel,
 )
+from services.confidence import Assembly, rank_assemblies
 from services.layout_model import build_polygon
 from services.local_layout import estimate_local_layout
-from services.placement import Placement, make_piece, place_pieces, rot90
+from services.placement import (
+    Piece,
+    Placement,
+    PlacementCandidate,
+    SiteHints,
+    hint_pairs,
+    make_piece,
+    piece_prior,
+    place_pieces,
+    rot90,
+)
+from services.placement.priors import fit_frame, wrap_angle
 from services.refinement import Refinement, refine_translations
 from services.registration import premerge
 from services.types import FloatArray, LocalLayout, ProgressFn
@@ -64,31 +79,217 @@ def _room_height(layouts: Sequence[LocalLayout]) -> float | None:
     return float(np.median(heights)) if heights else None
 
 
+@dataclass(frozen=True)
+class _Placed:
+    """One assembly made concrete: refined translations, poses, floorplan (site frame)."""
+
+    assembly: Assembly | None
+    candidate: PlacementCandidate
+    refinement: Refinement
+    poses: dict[str, FloatArray]
+    polygon: FloatArray | None
+
+
+def _site_hints(
+    layouts: Mapping[str, LocalLayout], usable: Sequence[str], hints: HintsModel | None
+) -> SiteHints:
+    if hints is None:
+        return SiteHints()
+    priors = {
+        fid: piece_prior(layouts[fid], prior)
+        for fid, prior in hints.fragments.items()
+        if fid in usable
+    }
+    return SiteHints(priors, hint_pairs(hints.neighbours, hints.order))
+
+
+def _root_first(usable: list[str], hints: SiteHints) -> list[str]:
+    """The fixed first piece: with priors, the most certain one (the site frame then
+    follows the hints' frame most closely); else the first fragment."""
+    if not hints.priors:
+        return usable
+    root = min(hints.priors, key=lambda fid: (hints.priors[fid].sigma_xy, fid))
+    return [root, *(fid for fid in usable if fid != root)]
+
+
+def _concrete(
+    layouts: Mapping[str, LocalLayout],
+    pieces: Mapping[str, Piece],
+    cand: PlacementCandidate,
+    translations: FloatArray,
+    params: PipelineParams,
+    assembly: Assembly | None = None,
+) -> _Placed:
+    """Refine an assembly's translations and build its poses and floorplan."""
+    ordered = [pieces[fid] for fid in cand.order]
+    if cand.missing == 0:
+        refined = refine_translations(ordered, cand.rotations, translations)
+    else:
+        # An open chain is already joined end to end; there is no loop to refine.
+        refined = Refinement(translations, "skipped: open chain", 0.0, 0.0)
+    poses = {
+        fid: fragment_pose(layouts[fid], rotation, refined.translations[k])
+        for k, (fid, rotation) in enumerate(zip(cand.order, cand.rotations, strict=True))
+    }
+    polygon = None
+    loop_length = sum(p.length for p in ordered)
+    gap_limit = max(1.0, params.placement.max_closure_share * loop_length)
+    gap = float(np.abs(translations[-1] + _end_vector(ordered[-1], cand.rotations[-1])).sum())
+    if (
+        cand.missing == 0
+        and len(ordered) >= 2
+        and gap <= gap_limit
+        and refined.status == "solved"
+        and refined.violation_after <= params.placement.closure_tolerance
+    ):
+        polygon = build_polygon(ordered, cand.rotations, refined.translations)
+    return _Placed(assembly, cand, refined, poses, polygon)
+
+
+def _end_vector(piece: Piece, rotation: int) -> FloatArray:
+    end: FloatArray = rot90(rotation) @ piece.keypoints[-1]
+    return end
+
+
+def _to_hints_frame(
+    placed: _Placed, hints: SiteHints, layouts: Mapping[str, LocalLayout]
+) -> _Placed:
+    """The assembly moved into the hints' frame (fitted to the prior poses)."""
+    rotations = dict(zip(placed.candidate.order, placed.candidate.rotations, strict=True))
+    sources = {
+        fid: (pose[:3, :3] @ layouts[fid].keypoints_local()[0] + pose[:3, 3])[:2]
+        for fid, pose in placed.poses.items()
+    }
+    yaw, shift = fit_frame(hints.priors, rotations, sources)
+    transform = np.eye(4)
+    transform[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
+    transform[:2, 3] = shift
+    poses = {fid: transform @ pose for fid, pose in placed.poses.items()}
+    polygon = None
+    if placed.polygon is not None:
+        polygon = placed.polygon @ transform[:2, :2].T + transform[:2, 3]
+    return _Placed(placed.assembly, placed.candidate, placed.refinement, poses, polygon)
+
+
+def _contradicted_hints(
+    placed: _Placed, hints: SiteHints, layouts: Mapping[str, LocalLayout]
+) -> list[dict[str, Any]]:
+    """Hints the chosen assembly disagrees with by more than three standard deviations."""
+    out: list[dict[str, Any]] = [
+        {"kind": "order" if pair.directed else "neighbours", "fragments": [pair.a, pair.b]}
+        for pair in placed.candidate.violated_pairs
+    ]
+    for fid, prior in hints.priors.items():
+        if fid not in placed.poses:
+            continue
+        pose = placed.poses[fid]
+        source = (pose[:3, :3] @ layouts[fid].keypoints_local()[0] + pose[:3, 3])[:2]
+        distance = float(np.linalg.norm(source - prior.source))
+        to_hints = pose[:3, :3] @ layouts[fid].frame.rotation.T
+        yaw_error = abs(wrap_angle(float(np.arctan2(to_hints[1, 0], to_hints[0, 0])) - prior.yaw))
+        if distance > 3 * prior.sigma_xy or yaw_error > 3 * prior.sigma_yaw:
+            out.append(
+                {
+                    "kind": "pose",
+                    "fragments": [fid],
+                    "distance_m": round(distance, 3),
+                    "yaw_error_deg": round(float(np.degrees(yaw_error)), 2),
+                }
+            )
+    return out
+
+
+def _rooms(polygon: FloatArray | None, height: float | None) -> FloorplanModel:
+    if polygon is None:
+        return FloorplanModel()
+    room = RoomModel(id="room_0", polygon=polygon.tolist(), floor_z=0.0, ceiling_z=height)
+    return FloorplanModel(rooms=[room])
+
+
+def _alternative(placed: _Placed, height: float | None) -> AlternativeModel:
+    assert placed.assembly is not None
+    return AlternativeModel(
+        probability=placed.assembly.probability,
+        fragments=[
+            AlternativeFragmentModel(id=fid, pose=placed.poses[fid].tolist(), loop_index=k)
+            for k, fid in enumerate(placed.candidate.order)
+        ],
+        floorplan=_rooms(placed.polygon, height),
+    )
+
+
 def _diagnostics(
-    placement: Placement, refinement_status: str, gaps: tuple[float, float]
+    placement: Placement,
+    main: _Placed,
+    assemblies: Sequence[Assembly],
+    contradicted: list[dict[str, Any]],
 ) -> dict[str, Any]:
-    best = placement.best
+    best = main.candidate
+    refined = main.refinement
     return {
-        "energy": {
-            "total": best.energy,
-            "complexity": best.complexity,
-            "closure": best.closure,
-            "boundary": best.boundary,
-        },
-        "energy_margin": (
-            placement.alternatives[0].energy - best.energy if placement.alternatives else None
-        ),
-        "alternatives": [
-            {"energy": alt.energy, "order": list(alt.order), "rotations": list(alt.rotations)}
-            for alt in placement.alternatives
+        "energy": {"total": best.energy, **best.features},
+        "assemblies": [
+            {
+                "probability": a.probability,
+                "energy": a.candidate.energy,
+                "placements": a.members,
+                "order": list(a.candidate.order),
+                "rotations": list(a.candidate.rotations),
+            }
+            for a in assemblies
         ],
         "search": {"nodes": placement.nodes_searched, "exhaustive": placement.exhaustive},
         "refinement": {
-            "status": refinement_status,
-            "violation_before": gaps[0],
-            "violation_after": gaps[1],
+            "status": refined.status,
+            "violation_before": refined.violation_before,
+            "violation_after": refined.violation_after,
         },
+        "hints_contradicted": contradicted,
     }
+
+
+def _choose(
+    layouts: Mapping[str, LocalLayout],
+    pieces: Mapping[str, Piece],
+    placement: Placement,
+    params: PipelineParams,
+) -> tuple[_Placed, list[_Placed], list[Assembly]]:
+    """The main assembly and the alternatives worth reporting, made concrete."""
+    piece_list = list(pieces.values())
+    assemblies = (
+        rank_assemblies(piece_list, placement, params.placement) if placement.closed else []
+    )
+    if not assemblies:
+        main = _concrete(layouts, pieces, placement.best, placement.translations, params)
+        return main, [], []
+    concrete = [
+        _concrete(layouts, pieces, a.candidate, a.translations, params, a)
+        for a in assemblies[: params.placement.max_alternatives + 1]
+    ]
+    closing = [c for c in concrete if c.polygon is not None]
+    if not closing:
+        return concrete[0], [], assemblies
+    main, rest = closing[0], closing[1:]
+    floor = params.placement.min_alternative_probability
+    kept = [c for c in rest if c.assembly is not None and c.assembly.probability >= floor]
+    return main, kept[: params.placement.max_alternatives], assemblies
+
+
+def _status(
+    main: _Placed,
+    alternatives: Sequence[_Placed],
+    n_usable: int,
+    n_all: int,
+    params: PipelineParams,
+) -> tuple[str, float]:
+    """The result's status and confidence (see the contract, section 3)."""
+    if main.polygon is None or main.assembly is None or n_usable < 2 or n_usable < n_all:
+        return "open", 0.0
+    confidence = main.assembly.probability
+    if confidence >= params.placement.closed_confidence:
+        return "closed", confidence
+    # Unsure, with the runners-up to show; a lone assembly we doubt is no room to act on.
+    return ("ambiguous" if alternatives else "open"), confidence
 
 
 def place_site(
@@ -104,7 +305,8 @@ def place_site(
     layouts : local layout per fragment id; fragments keep this order in the result.
     params : algorithm parameters (placement section used here).
     progress : optional callback ``(stage, fraction)``.
-    hints : optional fleet knowledge: prior poses, known neighbours, known order.
+    hints : optional fleet knowledge: prior poses, known neighbours, known order. With prior
+        poses the result is in the hints' frame.
     """
     report = progress or (lambda stage, fraction: None)
     fragments = {
@@ -116,11 +318,10 @@ def place_site(
         for fid, lay in layouts.items()
     }
     usable = [fid for fid, lay in layouts.items() if lay.ok]
+    site_hints = _site_hints(layouts, usable, hints)
     report("placement", 0.1)
-    pieces = {fid: make_piece(fid, layouts[fid]) for fid in usable}
-    order_hint = hints.order if hints else None
-    neighbours = hints.neighbours if hints else ()
-    placement = place_pieces(list(pieces.values()), params.placement, order_hint, neighbours)
+    pieces = {fid: make_piece(fid, layouts[fid]) for fid in _root_first(usable, site_hints)}
+    placement = place_pieces(list(pieces.values()), params.placement, site_hints)
     if placement is None:
         report("done", 1.0)
         return ResultModel(
@@ -129,44 +330,27 @@ def place_site(
             diagnostics={"reason": "no fragment shows a wall"},
         )
     report("refinement", 0.7)
-    best = placement.best
-    ordered = [pieces[fid] for fid in best.order]
-    if placement.closed:
-        refined = refine_translations(ordered, best.rotations, placement.translations)
-    else:
-        # An open chain is already joined end to end; there is no loop to refine.
-        refined = Refinement(placement.translations, "skipped: open chain", 0.0, 0.0)
-    translations = refined.translations
-    for index, (fid, rotation) in enumerate(zip(best.order, best.rotations, strict=True)):
-        pose = fragment_pose(layouts[fid], rotation, translations[index])
+    main, alternatives, assemblies = _choose(layouts, pieces, placement, params)
+    if site_hints.priors:
+        main = _to_hints_frame(main, site_hints, layouts)
+        alternatives = [_to_hints_frame(alt, site_hints, layouts) for alt in alternatives]
+    status, confidence = _status(main, alternatives, len(usable), len(layouts), params)
+    for index, fid in enumerate(main.candidate.order):
         fragments[fid].placed = True
-        fragments[fid].pose = pose.tolist()
+        fragments[fid].pose = main.poses[fid].tolist()
         fragments[fid].loop_index = index
-    loop_length = sum(float(np.abs(np.diff(p.keypoints, axis=0)).sum()) for p in ordered)
-    gap_limit = max(1.0, params.placement.max_closure_share * loop_length)
-    closed = (
-        placement.closed
-        and best.closure <= gap_limit
-        and len(best.order) == len(layouts)
-        and len(usable) >= 2
-        and refined.status == "solved"
-        and refined.violation_after <= params.placement.closure_tolerance
-    )
-    rooms = []
-    if closed:
-        polygon = build_polygon(ordered, best.rotations, translations)
-        height = _room_height([layouts[fid] for fid in usable])
-        rooms.append(
-            RoomModel(id="room_0", polygon=polygon.tolist(), floor_z=0.0, ceiling_z=height)
-        )
+    height = _room_height([layouts[fid] for fid in usable])
+    contradicted = _contradicted_hints(main, site_hints, layouts)
     report("done", 1.0)
     return ResultModel(
-        status="closed" if closed else "open",
+        status=status,
+        confidence=confidence,
         fragments=list(fragments.values()),
-        floorplan=FloorplanModel(rooms=rooms),
-        diagnostics=_diagnostics(
-            placement, refined.status, (refined.violation_before, refined.violation_after)
-        ),
+        floorplan=_rooms(main.polygon, height),
+        alternatives=[_alternative(alt, height) for alt in alternatives]
+        if status != "open"
+        else [],
+        diagnostics=_diagnostics(placement, main, assemblies, contradicted),
     )
 
 

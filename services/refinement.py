@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from scipy import sparse
 
 from services.placement import Piece, rot90
+from services.placement.pieces import UNIT
 from services.types import FloatArray
 
 __all__ = ["Refinement", "refine_translations"]
@@ -30,7 +31,6 @@ __all__ = ["Refinement", "refine_translations"]
 _MARGIN = 1e-3  # m, turns the paper's strict inequalities into solvable ones
 _OFFSET_SLACK = 0.10  # m, largest offset mismatch left between walls joined in parallel
 _OFFSET_WEIGHT = 10.0  # weight of that mismatch against the joints' distance
-_UNIT = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
 
 
 @dataclass(frozen=True)
@@ -80,8 +80,8 @@ def _junction_rows(
         k = (i + 1) % n
         q, q_prev = sites[i][-1], sites[i][-2]
         p, p_next = sites[k][0], sites[k][1]
-        d_i = _UNIT[(pieces[i].directions[-1] + rotations[i]) % 4]
-        d_k = _UNIT[(pieces[k].directions[0] + rotations[k]) % 4]
+        d_i = UNIT[(pieces[i].directions[-1] + rotations[i]) % 4]
+        d_k = UNIT[(pieces[k].directions[0] + rotations[k]) % 4]
 
         def diff(vec: FloatArray, i: int = i, k: int = k) -> FloatArray:
             """Row of vec . (t_k - t_i)."""
@@ -141,7 +141,7 @@ def _solve(problem: _Problem, keep: NDArray[np.bool_]) -> tuple[str, FloatArray 
         max_iter=20000,
         polishing=True,
     )
-    result = solver.solve()
+    result = solver.solve(raise_error=False)  # an unsolved status is checked below
     status = str(result.info.status)
     if status not in ("solved", "solved inaccurate") or result.x is None:
         return status, None

@@ -8,7 +8,9 @@ from functools import cache
 import numpy as np
 import pytest
 
-from services.placement import Piece, _direction_index, rot90
+from schemas.params import PlacementParams
+from services.placement import Piece, direction_index, rot90
+from services.placement.pieces import FreeSpace
 from services.synthetic import SceneSpec, SyntheticScene, generate_scene
 from tests.service_fixtures import (  # noqa: F401  (real Redis 7 / 6.2, uvicorn, workers)
     any_redis,
@@ -22,7 +24,22 @@ from tests.service_fixtures import (  # noqa: F401  (real Redis 7 / 6.2, uvicorn
     start_workers,
 )
 
-__all__ = ["chains_from_polygon", "small_scene"]
+__all__ = ["UNTUNED", "bare_piece", "chains_from_polygon", "small_scene"]
+
+# The placement energy before fitting: unit weights, and the plain Boltzmann share (with a
+# fixed 'none of these' energy) as the confidence. Tests that check energies, ties and
+# shares by hand use these, so that refitting the defaults does not move them.
+UNTUNED = PlacementParams(
+    weight_turn=1.0,
+    weight_hull=1.0,
+    weight_closure=1.0,
+    weight_structure=1.0,
+    weight_boundary=1.0,
+    weight_conflict=1.0,
+    unexplored_energy=3.0,
+    unexplored_per_piece=0.0,
+    confidence_coefficients=(0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+)
 
 
 @cache
@@ -64,10 +81,18 @@ def chains_from_polygon(
         ]
         kp = np.vstack([_point_at(polygon, start), *corners, _point_at(polygon, end)])
         kp = (kp - kp[0]) @ rot90(rotations[k]).T
-        dirs = tuple(_direction_index(d) for d in np.diff(kp, axis=0))
-        empty3, empty2 = np.zeros((0, 3)), np.zeros((0, 2))
-        pieces.append(Piece(f"p{k}", kp, dirs, empty3, empty3, empty2))
+        pieces.append(bare_piece(f"p{k}", kp))
     return pieces
+
+
+def bare_piece(piece_id: str, keypoints: np.ndarray) -> Piece:
+    """A piece with only its chain: no end regions, no footprint, no free space."""
+    dirs = tuple(direction_index(d) for d in np.diff(keypoints, axis=0))
+    empty3, empty2 = np.zeros((0, 3)), np.zeros((0, 2))
+    nothing = FreeSpace(
+        np.zeros((0, 0), dtype=bool), np.zeros(2), 0.25, np.full(2, np.inf), np.full(2, -np.inf)
+    )
+    return Piece(piece_id, keypoints, dirs, empty3, empty3, empty2, nothing)
 
 
 @pytest.fixture

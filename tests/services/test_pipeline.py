@@ -2,16 +2,23 @@
 
 from __future__ import annotations
 
+import math
+from functools import cache
+from typing import get_args
+
 import numpy as np
 import pytest
 
+from schemas.hints import FragmentPrior, HintsModel
 from schemas.layout import LocalLayoutWire
 from schemas.params import PipelineParams, RegistrationParams
-from schemas.result import ResultModel
-from services.evaluation import evaluate_result
+from schemas.result import ResultModel, Status
+from services.evaluation import evaluate_result, polygon_keypoint_error
+from services.geometry import signed_area
 from services.pipeline import align_clouds, estimate_layout, place_site
 from services.synthetic import ground_truth_json
-from tests.conftest import small_scene
+from services.types import LocalLayout, ManhattanFrame
+from tests.conftest import UNTUNED, chains_from_polygon, small_scene
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -142,3 +149,195 @@ def test_premerge_gives_every_input_fragment_a_pose():
     # copy-local -> first-local is inv(moved); both poses must agree on that.
     expected = np.array(by_id[first.id].pose) @ np.linalg.inv(moved)
     assert np.allclose(np.array(by_id["copy"].pose), expected, atol=0.05)
+
+
+# ---------------------------------------------------------------------------------------------
+# Contract v2: status, confidence, alternatives, hints
+# ---------------------------------------------------------------------------------------------
+
+L_ROOM = np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], dtype=np.float64)
+
+
+@cache
+def _scene_layouts(seed: int) -> dict[str, LocalLayout]:
+    """Local layouts of a small easy scene, computed once per module run."""
+    return _layouts(small_scene("easy", seed))
+
+
+def _rz(angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _hand_layouts(cuts: list[float]) -> dict[str, LocalLayout]:
+    """Layouts of the L room's pieces as scans would give them: each in its own frame
+    (turned about z, floor at its own height), no end regions, no footprint."""
+    pieces = chains_from_polygon(L_ROOM, cuts, [0] * len(cuts))
+    return {
+        p.id: LocalLayout(
+            keypoints=p.keypoints + np.array([1.0, 2.0]),
+            frame=ManhattanFrame(rotation=_rz(0.3 * k), floor_z=0.2 * k, ceiling_z=2.7),
+        )
+        for k, p in enumerate(pieces)
+    }
+
+
+def _assert_rigid(pose) -> None:
+    matrix = np.asarray(pose, dtype=np.float64)
+    assert matrix.shape == (4, 4)
+    assert np.allclose(matrix[:3, :3] @ matrix[:3, :3].T, np.eye(3), atol=1e-9)
+    assert np.linalg.det(matrix[:3, :3]) == pytest.approx(1.0)
+    assert matrix[3].tolist() == [0.0, 0.0, 0.0, 1.0]
+
+
+def _yaw(matrix: np.ndarray) -> float:
+    return math.atan2(matrix[1, 0], matrix[0, 0])
+
+
+def _pose_errors(result: ResultModel, scene) -> dict[str, tuple[float, float]]:
+    """Per fragment: mean horizontal distance (m) between its points mapped by the result's
+    pose and by the true pose, and the yaw difference (degrees)."""
+    by_id = {f.id: f for f in result.fragments}
+    out = {}
+    for truth in scene.fragments:
+        pose = np.asarray(by_id[truth.id].pose)
+        points = truth.points[::40]
+        mine = points @ pose[:3, :3].T + pose[:3, 3]
+        true = points @ truth.pose[:3, :3].T + truth.pose[:3, 3]
+        distance = float(np.linalg.norm(mine[:, :2] - true[:, :2], axis=1).mean())
+        yaw = abs(math.remainder(_yaw(pose) - _yaw(truth.pose), 2 * math.pi))
+        out[truth.id] = (distance, math.degrees(yaw))
+    return out
+
+
+def _true_priors(scene, moved: str | None = None, by: float = 10.0) -> HintsModel:
+    fragments = {}
+    for truth in scene.fragments:
+        pose = truth.pose.copy()
+        if truth.id == moved:
+            pose[0, 3] += by
+        fragments[truth.id] = FragmentPrior(pose=pose.tolist(), sigma_xy=1.5, sigma_yaw_deg=20)
+    return HintsModel(fragments=fragments)
+
+
+def test_result_follows_contract_v2():
+    result = place_site(_scene_layouts(0))
+    assert result.schema_version == 2
+    assert result.status in get_args(Status)
+    assert result.status == "closed"
+    assert 0.0 <= result.confidence <= 1.0
+    assert result.confidence >= PipelineParams().placement.closed_confidence
+    ResultModel.model_validate(result.model_dump(mode="json"))
+    diagnostics = result.diagnostics
+    assert {"energy", "assemblies", "search", "refinement", "hints_contradicted"} <= set(
+        diagnostics
+    )
+    assert diagnostics["assemblies"][0]["probability"] == pytest.approx(result.confidence)
+    assert diagnostics["search"]["exhaustive"] is True
+    assert diagnostics["hints_contradicted"] == []
+
+
+def test_tied_rooms_are_ambiguous_with_full_alternatives():
+    # Two pieces of the L room can swap places: another room, closing just as well.
+    layouts = _hand_layouts([1.0, 9.5, 14.0, 20.0])
+    result = place_site(layouts, PipelineParams(placement=UNTUNED))
+    ResultModel.model_validate(result.model_dump(mode="json"))
+    assert result.status == "ambiguous"
+    assert 0.3 < result.confidence < UNTUNED.closed_confidence
+    assert len(result.alternatives) >= 1
+    alternative = result.alternatives[0]
+    assert alternative.probability == pytest.approx(result.confidence, rel=1e-6)
+    assert result.confidence + sum(a.probability for a in result.alternatives) <= 1.0
+    assert {f.id for f in alternative.fragments} == set(layouts)
+    assert sorted(f.loop_index or 0 for f in alternative.fragments) == [0, 1, 2, 3]
+    for fragment in result.fragments:
+        assert fragment.pose is not None
+        _assert_rigid(fragment.pose)
+    for alternative_fragment in alternative.fragments:
+        _assert_rigid(alternative_fragment.pose)
+    # Both floorplans are rooms, and they are different rooms: the L room is one of them.
+    main_room = np.array(result.floorplan.rooms[0].polygon)
+    other_room = np.array(alternative.floorplan.rooms[0].polygon)
+    areas = sorted([signed_area(main_room), signed_area(other_room)])
+    assert areas[0] > 0.0
+    assert any(a == pytest.approx(39.0, abs=0.2) for a in areas)
+    assert areas[1] - areas[0] > 1.0
+    main_poses = {f.id: np.array(f.pose) for f in result.fragments}
+    assert any(not np.allclose(main_poses[f.id], f.pose, atol=0.05) for f in alternative.fragments)
+
+
+def test_identical_pieces_in_any_order_are_one_room():
+    # A square cut into four identical quarters: all six orders close the same square, so
+    # they are one answer (which quarter is where cannot be told from the walls).
+    square = np.array([[0, 0], [4, 0], [4, 4], [0, 4]], dtype=np.float64)
+    pieces = chains_from_polygon(square, [2.0, 6.0, 10.0, 14.0], [0, 3, 2, 1])
+    frame = ManhattanFrame(rotation=np.eye(3), floor_z=0.0, ceiling_z=2.5)
+    layouts = {p.id: LocalLayout(keypoints=p.keypoints, frame=frame) for p in pieces}
+    result = place_site(layouts, PipelineParams(placement=UNTUNED))
+    assert result.status in ("closed", "ambiguous")
+    (assembly,) = result.diagnostics["assemblies"]
+    assert assembly["placements"] == 6
+    assert result.alternatives == []
+    assert signed_area(np.array(result.floorplan.rooms[0].polygon)) == pytest.approx(16.0, abs=0.1)
+
+
+def test_tied_rooms_are_closed_with_alternatives_under_a_lower_bar():
+    layouts = _hand_layouts([1.0, 9.5, 14.0, 20.0])
+    params = PipelineParams(placement=UNTUNED.model_copy(update={"closed_confidence": 0.45}))
+    result = place_site(layouts, params)
+    assert result.status == "closed"
+    assert result.confidence < 0.5
+    assert len(result.alternatives) == 1
+    assert len(result.alternatives[0].floorplan.rooms) == 1
+
+
+def test_an_order_hint_resolves_the_tie():
+    layouts = _hand_layouts([1.0, 9.5, 14.0, 20.0])
+    result = place_site(layouts, hints=HintsModel(order=["p0", "p1", "p2", "p3"]))
+    assert result.status == "closed"
+    assert [f.loop_index for f in result.fragments] == [0, 1, 2, 3]
+    assert signed_area(np.array(result.floorplan.rooms[0].polygon)) == pytest.approx(39.0, abs=0.2)
+    assert result.diagnostics["hints_contradicted"] == []
+
+
+def test_a_contradicted_order_hint_is_reported():
+    layouts = _hand_layouts([1.0, 9.5, 20.0])
+    result = place_site(layouts, hints=HintsModel(order=["p0", "p2"]))
+    assert result.status == "closed"
+    assert [f.loop_index for f in result.fragments] == [0, 1, 2]  # the scans win
+    assert {"kind": "order", "fragments": ["p0", "p2"]} in result.diagnostics["hints_contradicted"]
+
+
+def test_with_prior_poses_the_result_is_in_the_hints_frame():
+    scene = small_scene("easy", 0)
+    layouts = _scene_layouts(0)
+    without = _pose_errors(place_site(layouts), scene)
+    assert max(d for d, _ in without.values()) > 1.0  # the site frame is not the world's
+    result = place_site(layouts, hints=_true_priors(scene))
+    assert result.status == "closed"
+    for distance, yaw in _pose_errors(result, scene).values():
+        assert distance < 0.3
+        assert yaw < 2.0
+    polygon = np.array(result.floorplan.rooms[0].polygon)
+    assert polygon_keypoint_error(polygon, scene.polygon) < 0.3
+    assert result.diagnostics["hints_contradicted"] == []
+
+
+def test_a_contradicted_prior_is_reported():
+    scene = small_scene("easy", 0)
+    moved = scene.fragments[1].id
+    result = place_site(_scene_layouts(0), hints=_true_priors(scene, moved=moved))
+    assert result.status == "closed"
+    reported = [h for h in result.diagnostics["hints_contradicted"] if h["kind"] == "pose"]
+    assert [moved] in [h["fragments"] for h in reported]
+
+
+def test_a_contradicted_prior_does_not_move_the_others():
+    scene = small_scene("easy", 0)
+    moved = scene.fragments[1].id
+    result = place_site(_scene_layouts(0), hints=_true_priors(scene, moved=moved))
+    errors = _pose_errors(result, scene)
+    for fid, (distance, yaw) in errors.items():
+        if fid != moved:
+            assert distance < 0.3
+            assert yaw < 2.0

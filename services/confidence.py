@@ -1,0 +1,160 @@
+"""How sure the placement is: the assemblies found, as distinct rooms with probabilities.
+
+The search returns its best few assemblies with energies (negative log-likelihoods up to a
+constant; the weights are fitted, ``bench/tune_placement.py``). Assemblies whose floorplans
+are the same room (mean keypoint distance under a small share of the diagonal: swapped
+look-alike pieces, a jog placed either side of a cut) are one answer, and their Boltzmann
+shares add up. A 'none of these' share stands for everything the search did not return (a
+wrong local layout, an assembly beyond the node budget).
+
+The shares rank the rooms; how far to trust the first one also depends on what they do not
+see (how many pieces, how well the loop closes, whether the search finished), so the main
+room's probability is a logistic function of its share and of those, fitted on the
+benchmark's tune split. The other rooms share what is left in proportion to their shares.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from schemas.params import PlacementParams
+from services.evaluation import polygon_keypoint_error
+from services.layout_model import build_polygon
+from services.placement import Piece, Placement, PlacementCandidate, translations_of
+from services.types import FloatArray
+
+__all__ = [
+    "CALIBRATION_FEATURES",
+    "Assembly",
+    "calibration_features",
+    "rank_assemblies",
+    "same_room_groups",
+]
+
+CALIBRATION_FEATURES = (
+    "bias", "logit share", "pieces", "closure", "conflict", "turns", "truncated",
+)  # fmt: skip
+_SHARE_CLIP = 1e-4
+
+
+@dataclass(frozen=True)
+class Assembly:
+    """One distinct room the pieces close into.
+
+    candidate: the lowest-energy placement of that room; members: how many placements the
+    search found for it; share: its Boltzmann share; probability: calibrated probability
+    that this room is the right one.
+    translations: (n, 2) site positions of the candidate's sources (unrefined), loop order.
+    polygon: (V, 2) its unrefined floorplan, site frame.
+    """
+
+    candidate: PlacementCandidate
+    members: int
+    share: float
+    probability: float
+    translations: FloatArray
+    polygon: FloatArray
+
+
+def same_room_groups(
+    pieces: Sequence[Piece], candidates: Sequence[PlacementCandidate], share: float
+) -> tuple[list[int], list[FloatArray], list[FloatArray]]:
+    """Group complete candidates by room, lowest energy first.
+
+    Returns (group index per candidate, the unrefined translations and floorplan of each
+    group's first candidate). A candidate joins the first group whose floorplan is within
+    ``share`` of the diagonal of its own.
+    """
+    by_id = {p.id: p for p in pieces}
+    groups: list[int] = []
+    translations: list[FloatArray] = []
+    polygons: list[FloatArray] = []
+    for cand in candidates:
+        moved = translations_of(pieces, cand)
+        polygon = build_polygon([by_id[fid] for fid in cand.order], cand.rotations, moved)
+        match = next((g for g, p in enumerate(polygons) if _same_room(polygon, p, share)), None)
+        if match is None:
+            match = len(polygons)
+            translations.append(moved)
+            polygons.append(polygon)
+        groups.append(match)
+    return groups, translations, polygons
+
+
+def calibration_features(
+    share: float, best: PlacementCandidate, pieces: int, truncated: bool
+) -> FloatArray:
+    """The calibration's inputs (``CALIBRATION_FEATURES``) for a main room."""
+    clipped = min(max(share, _SHARE_CLIP), 1.0 - _SHARE_CLIP)
+    return np.array(
+        [
+            1.0,
+            math.log(clipped / (1.0 - clipped)),
+            float(pieces),
+            best.features.get("closure", 0.0),
+            best.features.get("conflict", 0.0),
+            best.features.get("turns", 0.0),
+            float(truncated),
+        ]
+    )
+
+
+def rank_assemblies(
+    pieces: Sequence[Piece], placement: Placement, params: PlacementParams
+) -> list[Assembly]:
+    """The distinct closed assemblies of a placement, most probable first.
+
+    Parameters
+    ----------
+    pieces : the pieces the placement was searched over.
+    placement : a closed placement (its candidates place every piece).
+    params : same-room share, 'none of these' energy, calibration coefficients.
+
+    Returns
+    -------
+    Assemblies whose probabilities sum to at most 1 (the rest is 'none of these').
+    """
+    complete = sorted((c for c in placement.candidates if c.missing == 0), key=lambda c: c.energy)
+    if not complete:
+        return []
+    groups, translations, polygons = same_room_groups(pieces, complete, params.same_room_share)
+    lowest = complete[0].energy
+    weights = np.zeros(len(polygons))
+    for cand, group in zip(complete, groups, strict=True):
+        weights[group] += math.exp(-(cand.energy - lowest))
+    unexplored = params.unexplored_energy + params.unexplored_per_piece * len(pieces)
+    shares = weights / (weights.sum() + math.exp(-unexplored))
+    firsts = [complete[groups.index(g)] for g in range(len(polygons))]
+    members = np.bincount(groups, minlength=len(polygons))
+    order = sorted(range(len(polygons)), key=lambda g: (-shares[g], firsts[g].energy))
+    main = order[0]
+    inputs = calibration_features(
+        float(shares[main]), firsts[main], len(pieces), not placement.exhaustive
+    )
+    z = float(np.asarray(params.confidence_coefficients) @ inputs)
+    confidence = 1.0 / (1.0 + math.exp(-z))
+    rest = max(1.0 - float(shares[main]), 1e-12)
+    return [
+        Assembly(
+            firsts[g],
+            int(members[g]),
+            float(shares[g]),
+            confidence if g == main else float(shares[g]) * (1.0 - confidence) / rest,
+            translations[g],
+            polygons[g],
+        )
+        for g in order
+    ]
+
+
+def _same_room(a: FloatArray, b: FloatArray, share: float) -> bool:
+    """True when two floorplans (same frame) are one room within ``share`` of the diagonal."""
+    if len(a) < 3 or len(b) < 3:
+        return False
+    both = np.vstack([a, b])
+    diagonal = float(np.linalg.norm(both.max(axis=0) - both.min(axis=0)))
+    return polygon_keypoint_error(a, b) < share * diagonal

@@ -1,0 +1,139 @@
+"""Hints as evidence: prior poses, known neighbours and known order (contract section 2).
+
+A prior pose says where a fragment's chain lies in the hints' frame, with standard
+deviations. The search scores an assembly's rotations and relative positions against the
+priors with a robust (Cauchy) loss, so a hint the scans contradict costs a bounded amount
+and is reported instead of obeyed. Known neighbour pairs and order become a cost on the
+junctions that break them.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from schemas.hints import FragmentPrior
+from services.types import FloatArray, LocalLayout
+
+__all__ = [
+    "HintPair",
+    "PiecePrior",
+    "SiteHints",
+    "fit_frame",
+    "hint_pairs",
+    "piece_prior",
+    "robust_cost",
+    "wrap_angle",
+]
+
+_ROBUST_SCALE = 2.0  # nats: beyond a few sigma a hint's cost grows only logarithmically
+_REWEIGHTS = 8  # iterations of the robust frame fit
+_OUTLIER_MISFIT = 11.34  # squared Mahalanobis distance: chi-square 99 % with 3 dof (x, y, yaw)
+
+
+@dataclass(frozen=True)
+class PiecePrior:
+    """A prior of one piece's placement in the hints frame.
+
+    yaw: angle (radians) of the piece's aligned x axis in the hints frame.
+    source: (2,) hints-frame position of the chain's source keypoint.
+    sigma_xy: meters; sigma_yaw: radians.
+    """
+
+    yaw: float
+    source: FloatArray
+    sigma_xy: float
+    sigma_yaw: float
+
+
+@dataclass(frozen=True)
+class HintPair:
+    """Two fragments known to be adjacent in the loop; ``directed``: b follows a."""
+
+    a: str
+    b: str
+    directed: bool
+
+
+@dataclass(frozen=True)
+class SiteHints:
+    """Hints resolved to piece ids: priors by piece id, and pair constraints."""
+
+    priors: Mapping[str, PiecePrior] = field(default_factory=dict)
+    pairs: tuple[HintPair, ...] = ()
+
+
+def piece_prior(layout: LocalLayout, prior: FragmentPrior) -> PiecePrior:
+    """The prior of a piece from its fragment's prior pose (local -> hints frame)."""
+    pose = np.asarray(prior.pose, dtype=np.float64)
+    to_hints = pose[:3, :3] @ layout.frame.rotation.T  # aligned -> hints
+    yaw = math.atan2(to_hints[1, 0], to_hints[0, 0])
+    source_local = layout.keypoints_local()[0]
+    source = pose[:3, :3] @ source_local + pose[:3, 3]
+    return PiecePrior(yaw, source[:2], prior.sigma_xy, math.radians(prior.sigma_yaw_deg))
+
+
+def wrap_angle(angle: float) -> float:
+    """Angle wrapped to [-pi, pi)."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def robust_cost(squared: float) -> float:
+    """Cauchy loss of a squared Mahalanobis distance: about half of it when small.
+
+    >>> round(robust_cost(0.0), 6), round(robust_cost(0.02), 3)
+    (0.0, 0.01)
+    """
+    return _ROBUST_SCALE * math.log1p(0.5 * squared / _ROBUST_SCALE)
+
+
+def fit_frame(
+    priors: Mapping[str, PiecePrior],
+    rotations: Mapping[str, int],
+    sources: Mapping[str, FloatArray],
+) -> tuple[float, FloatArray]:
+    """Yaw and (2,) shift of the site -> hints transform that best fits the priors.
+
+    rotations: quarter turns of each piece in the site frame; sources: (2,) site position
+    of each piece's source. A weighted fit (circular mean for the yaw), reweighted a few
+    times with the Cauchy loss of the search, so that a prior the assembly contradicts
+    does not drag the others' frame along.
+    """
+    ids = [i for i in priors if i in rotations]
+    offsets = np.array([wrap_angle(priors[i].yaw - rotations[i] * math.pi / 2) for i in ids])
+    yaw_precision = np.array([1.0 / priors[i].sigma_yaw ** 2 for i in ids])
+    xy_precision = np.array([1.0 / priors[i].sigma_xy ** 2 for i in ids])
+    targets = np.array([priors[i].source for i in ids])
+    placed = np.array([sources[i] for i in ids])
+    weights = np.ones(len(ids))
+    for step in range(_REWEIGHTS + 1):
+        yaw = float(np.angle(np.sum(weights * yaw_precision * np.exp(1j * offsets))))
+        turn = _rotation(yaw)
+        residual = targets - placed @ turn.T
+        w = weights * xy_precision
+        shift = (w[:, None] * residual).sum(axis=0) / w.sum()
+        misfit = np.sum((residual - shift) ** 2, axis=1) * xy_precision
+        misfit += np.array([wrap_angle(o - yaw) ** 2 for o in offsets]) * yaw_precision
+        weights = 1.0 / (1.0 + 0.5 * misfit / _ROBUST_SCALE)  # Cauchy weights
+        if step == _REWEIGHTS - 1:
+            # Last pass: the priors the assembly contradicts get no say at all.
+            inliers = misfit < _OUTLIER_MISFIT
+            weights = inliers.astype(np.float64) if inliers.any() else np.ones(len(ids))
+    return yaw, shift
+
+
+def _rotation(angle: float) -> FloatArray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s], [s, c]])
+
+
+def hint_pairs(neighbours: Sequence[tuple[str, str]], order: Sequence[str]) -> tuple[HintPair, ...]:
+    """The hints' pair constraints: neighbours (either may follow the other) and the
+    consecutive fragments of the known order (b directly follows a)."""
+    undirected = [HintPair(a, b, False) for a, b in neighbours]
+    directed = [HintPair(a, b, True) for a, b in itertools.pairwise(order)]
+    return tuple(undirected + directed)

@@ -1,0 +1,662 @@
+"""Global placement search: loop order and rotations of the pieces (paper 3.2).
+
+Depth-first branch and bound. The first piece is fixed (rotation 0, source at the origin);
+each step appends a piece at the previous one's target. What a simple rectilinear
+counter-clockwise loop implies cuts the tree: a junction continues the wall or turns by 90
+degrees (never folds back), so a rotation follows from the junction's turn; the turns add
+up to one full turn; walls may not cross or overlap. A child's lower bound adds what its
+junction costs, the cheapest way into every piece still to place, the turns still owed and
+the closure gap the remaining pieces cannot make up. Quick first passes that expand only
+the best one, two, three children per node (iterative broadening) find good loops early, so
+the full pass prunes tight.
+
+The search keeps the ``top_k`` best assemblies, and its budget is a number of nodes, never a
+time: the same input gives the same answer on any machine.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+
+import numpy as np
+
+from schemas.params import PlacementParams
+from services.placement.energy import (
+    FEATURES,
+    JunctionNoise,
+    closure_nll,
+    feature_weights,
+    hull_edges,
+    junction_displacement,
+)
+from services.placement.evidence import boundary_mismatch, end_voxels, register_ends
+from services.placement.pieces import SAMPLE_SPACING, Piece, rot90, shift_walls
+from services.placement.priors import HintPair, SiteHints, robust_cost, wrap_angle
+from services.types import FloatArray
+
+__all__ = [
+    "Placement",
+    "PlacementCandidate",
+    "evaluate_placement",
+    "place_pieces",
+    "translations_of",
+]
+
+_TURNS = (0, 1, -1)  # continue, turn left (convex corner), turn right (concave corner)
+_CROSS_EPS = 0.05  # m, walls may touch within this distance but not cross
+_UNPLACED_PENALTY = 100.0  # energy per piece left out of an open chain
+_SAME_PIECE = 1e6  # a piece never follows itself (unless it is the only one)
+# Directions u (max-norm 1) of the closure bound: the gap left is at least u . (-end) less
+# what the pieces still to place can reach along u (L1 distance to a convex set, by duality).
+_CLOSURE_DIRECTIONS = np.array(
+    [d for t in (-1.0, -0.5, 0.0, 0.5) for d in ((1.0, t), (-1.0, -t), (-t, 1.0), (t, -1.0))]
+)
+_BROADENING = (1, 2, 3)  # children per node in the search's quick first passes
+_F = {name: k for k, name in enumerate(FEATURES)}
+
+
+@dataclass(frozen=True)
+class PlacementCandidate:
+    """A complete placement, its energy and the features it is the weighted sum of.
+
+    order: piece ids in loop order (the first is the fixed piece); rotations: quarter turns
+    per piece, loop order; missing: pieces left out (open chains only).
+    """
+
+    energy: float
+    order: tuple[str, ...]
+    rotations: tuple[int, ...]
+    features: Mapping[str, float]
+    missing: int = 0
+    violated_pairs: tuple[HintPair, ...] = ()
+
+
+@dataclass(frozen=True)
+class Placement:
+    """The best placements found.
+
+    best: the lowest energy; alternatives: the runners-up, lowest energy first.
+    translations: (n, 2) float64, site position of each of best's pieces' source, loop order.
+    closed: True when the pieces form one simple counter-clockwise loop (turns add up to a
+    full turn); the gap left at its end is closed by the refinement.
+    exhaustive: the search finished within its node budget (the best is optimal).
+    """
+
+    best: PlacementCandidate
+    translations: FloatArray
+    alternatives: tuple[PlacementCandidate, ...]
+    nodes_searched: int
+    exhaustive: bool
+    closed: bool
+
+    @property
+    def candidates(self) -> tuple[PlacementCandidate, ...]:
+        """Best first, then the alternatives."""
+        return (self.best, *self.alternatives)
+
+
+@dataclass
+class _Search:
+    """The fixed data of one search and its running results."""
+
+    pieces: list[Piece]
+    params: PlacementParams
+    hints: SiteHints
+    require_closed: bool
+    weights: FloatArray = field(init=False)
+    noise: JunctionNoise = field(init=False)
+    structure: FloatArray = field(init=False)  # [a, b]: structure score of b after a
+    boundary: FloatArray = field(init=False)  # [a, b]: boundary mismatch of b after a
+    junction: FloatArray = field(init=False)  # [a, b]: weighted cost of the two
+    rotation_cost: FloatArray = field(init=False)  # [j, r]: prior cost of rotation r
+    reach: FloatArray = field(init=False)  # [j, d]: piece j's reach along direction d
+    displacement: list[list[tuple[FloatArray, FloatArray]]] = field(init=False)  # [in][out]
+    top: list[tuple[float, int, PlacementCandidate]] = field(default_factory=list)
+    breadth: int | None = None
+    lowest: float = np.inf  # energy of the best leaf so far
+    truncated: bool = False
+    nodes: int = 0
+    counter: itertools.count[int] = field(default_factory=itertools.count)
+
+    def __post_init__(self) -> None:
+        n = len(self.pieces)
+        self.weights = feature_weights(self.params)
+        self.noise = JunctionNoise.from_params(self.params)
+        self.structure, self.boundary = _pair_evidence(self.pieces, self.params)
+        cost = self.weights[_F["structure"]] * self.structure
+        cost = cost + self.weights[_F["boundary"]] * self.boundary
+        if n > 1:
+            np.fill_diagonal(cost, _SAME_PIECE)
+        self.junction = cost
+        self.rotation_cost = _rotation_costs(self.pieces, self.hints)
+        self.displacement = [
+            [junction_displacement(self.noise, h_in, h_out) for h_out in range(4)]
+            for h_in in range(4)
+        ]
+        ends = [np.stack([rot90(r) @ p.keypoints[-1] for r in range(4)]) for p in self.pieces]
+        self.reach = np.array([(_CLOSURE_DIRECTIONS @ e.T).max(axis=1) for e in ends])
+
+    @cached_property
+    def index(self) -> dict[str, int]:
+        return {p.id: k for k, p in enumerate(self.pieces)}
+
+    @cached_property
+    def pairs(self) -> list[tuple[int, int, bool]]:
+        """The hints' pair constraints by piece index (those naming absent pieces drop)."""
+        ix = self.index
+        return [(ix[p.a], ix[p.b], p.directed) for p in self.hints.pairs if {p.a, p.b} <= ix.keys()]
+
+    def out_of_budget(self) -> bool:
+        """True once the node budget is spent (the best found so far is then returned)."""
+        budget = self.params.max_search_nodes if self.require_closed else self.params.max_open_nodes
+        if self.nodes >= budget:
+            self.truncated = True
+        return self.truncated
+
+    def bound(self) -> float:
+        """Energy a new leaf must beat: that of the k-th best kept, and at most the best's
+        plus the energy window (an assembly that much less likely is worth nothing)."""
+        window = self.lowest + self.params.energy_window
+        if len(self.top) < self.params.top_k:
+            return window
+        return min(-self.top[0][0], window)
+
+    def record(self, cand: PlacementCandidate) -> None:
+        if any(c.order == cand.order and c.rotations == cand.rotations for _, _, c in self.top):
+            return  # found again by a later, wider pass
+        self.lowest = min(self.lowest, cand.energy)
+        item = (-cand.energy, next(self.counter), cand)
+        if len(self.top) < self.params.top_k:
+            heapq.heappush(self.top, item)
+        elif cand.energy < -self.top[0][0]:
+            heapq.heapreplace(self.top, item)
+        while len(self.top) > 1 and -self.top[0][0] > self.lowest + self.params.energy_window:
+            heapq.heappop(self.top)
+
+
+def _pair_evidence(
+    pieces: Sequence[Piece], params: PlacementParams
+) -> tuple[FloatArray, FloatArray]:
+    """Structure scores and boundary mismatches of every ordered pair [a, b] (b after a)."""
+    n = len(pieces)
+    targets = [end_voxels(p, "target") for p in pieces]
+    sources = [end_voxels(p, "source") for p in pieces]
+    structure, boundary = np.zeros((n, n)), np.zeros((n, n))
+    for a, b in itertools.product(range(n), repeat=2):
+        if a != b or n == 1:
+            # Coinciding structure is strong evidence for a junction; structure without
+            # a counterpart is weak evidence against it (occlusion, clutter that moved).
+            structure[a, b] = min(0.0, register_ends(targets[a], sources[b])[0])
+            boundary[a, b] = boundary_mismatch(pieces[a], pieces[b], params)
+    return structure, boundary
+
+
+def _rotation_costs(pieces: Sequence[Piece], hints: SiteHints) -> FloatArray:
+    """[j, r]: prior cost of piece j at rotation r, relative to the fixed first piece."""
+    costs = np.zeros((len(pieces), 4))
+    root = hints.priors.get(pieces[0].id) if pieces else None
+    if root is None:
+        return costs
+    for j, piece in enumerate(pieces[1:], start=1):
+        prior = hints.priors.get(piece.id)
+        if prior is None:
+            continue
+        variance = prior.sigma_yaw**2 + root.sigma_yaw**2
+        for r in range(4):
+            residual = wrap_angle(prior.yaw - root.yaw - r * np.pi / 2)
+            costs[j, r] = robust_cost(residual**2 / variance)
+    return costs
+
+
+def _position_cost(search: _Search, j: int, source: FloatArray) -> float:
+    """Prior cost of piece j's source at ``source`` (site frame), relative to the first
+    piece's prior; the site frame's yaw in the hints frame is the first piece's prior yaw."""
+    priors = search.hints.priors
+    root, prior = priors.get(search.pieces[0].id), priors.get(search.pieces[j].id)
+    if root is None or prior is None or j == 0:
+        return 0.0
+    c, s = np.cos(root.yaw), np.sin(root.yaw)
+    placed = np.array([[c, -s], [s, c]]) @ source  # the root's source is the site origin
+    expected = prior.source - root.source
+    variance = (
+        prior.sigma_xy**2
+        + root.sigma_xy**2
+        + float(expected @ expected) * (root.sigma_yaw**2 / max(len(priors), 1))
+    )
+    residual = placed - expected
+    return robust_cost(float(residual @ residual) / variance)
+
+
+@dataclass(frozen=True)
+class _State:
+    order: tuple[int, ...]
+    rotations: tuple[int, ...]
+    sources: tuple[FloatArray, ...]  # site position of each placed piece's source
+    end: FloatArray
+    heading: int
+    turning: int
+    features: FloatArray  # running feature sums (turns, structure, boundary, conflict, prior)
+    mean: FloatArray  # (2,) hidden junction displacement so far, mean
+    var: FloatArray  # (2,) and variance
+    walls: FloatArray
+    vertices: FloatArray
+    samples: FloatArray  # (S, 2) site-frame wall samples of the placed pieces
+    box: tuple[float, float, float, float]  # their bounds (x_lo, y_lo, x_hi, y_hi)
+    violated: tuple[int, ...] = ()  # indices of broken hint pairs
+    resolved: frozenset[int] = frozenset()  # hint pairs already decided
+
+    def energy(self, weights: FloatArray) -> float:
+        return float(weights @ self.features)
+
+
+def _crosses(new: FloatArray, placed: FloatArray) -> bool:
+    """True when a new wall crosses or overlaps a placed one (touching is allowed)."""
+    if len(placed) == 0 or len(new) == 0:
+        return False
+    a = new[:, None, :]
+    b = placed[None, :, :]
+    perpendicular = a[..., 0] != b[..., 0]
+    inside_a = (b[..., 1] > a[..., 2] + _CROSS_EPS) & (b[..., 1] < a[..., 3] - _CROSS_EPS)
+    inside_b = (a[..., 1] > b[..., 2] + _CROSS_EPS) & (a[..., 1] < b[..., 3] - _CROSS_EPS)
+    overlap = np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 2], b[..., 2])
+    collinear = ~perpendicular & (np.abs(a[..., 1] - b[..., 1]) < 2 * _CROSS_EPS)
+    return bool(
+        np.any(perpendicular & inside_a & inside_b) or np.any(collinear & (overlap > _CROSS_EPS))
+    )
+
+
+def _trim_start(walls: FloatArray, start: FloatArray, length: float) -> FloatArray:
+    """Shorten the loop's first wall at its start: the closing piece may overshoot it by
+    up to ``length`` (neighbouring scans overlap) without counting as a crossing."""
+    out = walls.copy()
+    axis, _, lo, hi = out[0]
+    run = start[0] if axis == 0 else start[1]
+    if abs(run - lo) <= abs(run - hi):
+        out[0, 2] = min(lo + length, hi)
+    else:
+        out[0, 3] = max(hi - length, lo)
+    return out
+
+
+def _conflict(search: _Search, state: _State, j: int, rotation: int, samples: FloatArray) -> float:
+    """Meters of wall through space another scan saw empty, for piece j joining the state.
+
+    j's walls are tested against every placed piece's free space and the placed walls
+    against j's, each in the piece's own frame (rotate back, shift back).
+    """
+    hits = 0
+    x0, y0, x1, y1 = _box(samples)
+    for index, turn, source in zip(state.order, state.rotations, state.sources, strict=True):
+        free = search.pieces[index].rotated_free[turn]
+        (fx0, fy0, fx1, fy1), (sx, sy) = free.box, source.tolist()
+        if x0 <= fx1 + sx and x1 >= fx0 + sx and y0 <= fy1 + sy and y1 >= fy0 + sy:
+            hits += free.hits(samples - source)
+    free = search.pieces[j].rotated_free[rotation]
+    (fx0, fy0, fx1, fy1), (ex, ey) = free.box, state.end.tolist()
+    x0, y0, x1, y1 = state.box
+    if x0 <= fx1 + ex and x1 >= fx0 + ex and y0 <= fy1 + ey and y1 >= fy0 + ey:
+        hits += free.hits(state.samples - state.end)
+    return hits * SAMPLE_SPACING
+
+
+def _box(points: FloatArray) -> tuple[float, float, float, float]:
+    """(x_lo, y_lo, x_hi, y_hi) of (M, 2) points; an empty box for none."""
+    if len(points) == 0:
+        return (np.inf, np.inf, -np.inf, -np.inf)
+    (x0, y0), (x1, y1) = points.min(axis=0).tolist(), points.max(axis=0).tolist()
+    return (x0, y0, x1, y1)
+
+
+def _union(
+    a: tuple[float, float, float, float], b: tuple[float, float, float, float]
+) -> tuple[float, float, float, float]:
+    return (min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3]))
+
+
+def _resolve_pairs(
+    search: _Search, state: _State, follows: Mapping[int, int]
+) -> tuple[tuple[int, ...], frozenset[int]]:
+    """Hint pairs decided once the successors in ``follows`` are known (a -> b)."""
+    succ = dict(zip(state.order[:-1], state.order[1:], strict=True)) | dict(follows)
+    pred = {b: a for a, b in succ.items()}
+    violated, resolved = list(state.violated), set(state.resolved)
+    for k, (a, b, directed) in enumerate(search.pairs):
+        if k in resolved:
+            continue
+        if directed:
+            if a in succ:
+                resolved.add(k)
+                if succ[a] != b:
+                    violated.append(k)
+            continue
+        for x, y in ((a, b), (b, a)):
+            if x in succ and x in pred:  # both of x's neighbours are known
+                resolved.add(k)
+                if y not in (succ[x], pred[x]):
+                    violated.append(k)
+                break
+    return tuple(violated), frozenset(resolved)
+
+
+def _extend(search: _Search, state: _State, j: int, turn: int) -> _State | None:
+    """The state with piece j appended after a junction that turns by ``turn``, or None
+    when its walls would cross the placed ones."""
+    piece = search.pieces[j]
+    rotation = (state.heading + turn - piece.directions[0]) % 4
+    local_pts, local_walls, local_samples = piece.rotated[rotation]
+    pts = local_pts + state.end
+    walls = shift_walls(local_walls, state.end)
+    if _crosses(walls, state.walls):
+        return None
+    samples = local_samples + state.end
+    heading_out = (piece.directions[0] + rotation) % 4
+    mean, var = search.displacement[state.heading][heading_out]
+    prev = state.order[-1]
+    features = state.features.copy()
+    features[_F["turns"]] += turn != 0
+    features[_F["structure"]] += search.structure[prev, j]
+    features[_F["boundary"]] += search.boundary[prev, j]
+    features[_F["conflict"]] += _conflict(search, state, j, rotation, samples)
+    features[_F["prior"]] += search.rotation_cost[j, rotation]
+    features[_F["prior"]] += _position_cost(search, j, state.end)
+    child = _State(
+        order=(*state.order, j),
+        rotations=(*state.rotations, rotation),
+        sources=(*state.sources, state.end.copy()),
+        end=pts[-1],
+        heading=(piece.directions[-1] + rotation) % 4,
+        turning=state.turning + turn + piece.turning,
+        features=features,
+        mean=state.mean + mean,
+        var=state.var + var,
+        walls=np.vstack([state.walls, walls]),
+        vertices=np.vstack([state.vertices, pts]),
+        samples=np.vstack([state.samples, samples]),
+        box=_union(state.box, _box(samples)),
+        violated=state.violated,
+        resolved=state.resolved,
+    )
+    if search.pairs:
+        violated, resolved = _resolve_pairs(search, child, {})
+        child = replace(child, violated=violated, resolved=resolved)
+    return child
+
+
+def _close(search: _Search, state: _State) -> None:
+    """Score the state as a leaf: a closed loop (all pieces), or a partial open chain."""
+    first = search.pieces[0]
+    turn = {0: 0, 1: 1, 3: -1}.get((first.directions[0] - state.heading) % 4, 2)
+    closed_ok = turn != 2 and state.turning + turn == 4
+    missing = len(search.pieces) - len(state.order)
+    if search.require_closed and not closed_ok:
+        return
+    features = state.features.copy()
+    violated = state.violated
+    if not missing and closed_ok:
+        last = state.order[-1]
+        features[_F["turns"]] += turn != 0
+        features[_F["structure"]] += search.structure[last, 0]
+        features[_F["boundary"]] += search.boundary[last, 0]
+        mean, var = search.displacement[state.heading][first.directions[0]]
+        features[_F["closure"]] = closure_nll(state.end, state.mean + mean, state.var + var)
+        if search.pairs:
+            violated, _ = _resolve_pairs(search, state, {last: 0})
+    penalty = _UNPLACED_PENALTY * missing + search.params.hint_pair_cost * len(violated)
+    weights = search.weights
+    # The hull has at least 4 edges: skip computing it when even that cannot win.
+    if weights @ features + weights[_F["hull"]] * 4 + penalty >= search.bound():
+        return
+    features[_F["hull"]] = hull_edges(state.vertices)
+    energy = float(weights @ features) + penalty
+    ids = tuple(search.pieces[i].id for i in state.order)
+    pairs = tuple(search.hints.pairs[k] for k in violated) if search.hints.pairs else ()
+    named = dict(zip(FEATURES, features.tolist(), strict=True))
+    search.record(PlacementCandidate(energy, ids, state.rotations, named, missing, pairs))
+
+
+def _dfs(search: _Search, state: _State, remaining: tuple[int, ...]) -> None:
+    """Expand ``state``: children in order of their lower bound, cut at the bound. Only a
+    child that is visited pays for its geometry (crossing and free-space tests)."""
+    search.nodes += 1
+    if not remaining or not search.require_closed:
+        # An open search also keeps partial chains: the best one is placed when no
+        # arrangement of all pieces exists (walls would cross).
+        _close(search, state)
+        if not remaining:
+            return
+    options = _options(search, state, remaining)
+    if not options:
+        return
+    ranked = sorted(zip(_bounds(search, state, remaining, options), options, strict=True))
+    expanded = 0
+    for bound, (j, turn) in ranked:
+        if bound >= search.bound() or search.out_of_budget():
+            return
+        child = _extend(search, state, j, turn)
+        if child is not None:
+            _dfs(search, child, tuple(i for i in remaining if i != j))
+            expanded += 1
+            if search.breadth is not None and expanded >= search.breadth:
+                return
+
+
+def _beam(search: _Search, root: _State, width: int) -> None:
+    """Breadth-first search keeping the ``width`` children of lowest bound per loop position.
+
+    Children that reach the same pieces, last piece, heading and end (to 10 cm) are one:
+    the beam keeps different partial loops, not copies of one.
+    """
+    n = len(search.pieces)
+    layer = [root]
+    for _ in range(1, n):
+        scored: list[tuple[float, int, int, int]] = []
+        for k, state in enumerate(layer):
+            placed = set(state.order)
+            remaining = tuple(i for i in range(1, n) if i not in placed)
+            options = _options(search, state, remaining)
+            bounds = _bounds(search, state, remaining, options) if options else []
+            scored += [(b, k, j, turn) for b, (j, turn) in zip(bounds, options, strict=True)]
+        scored.sort()
+        parents, layer = layer, []
+        seen: set[tuple[object, ...]] = set()
+        for bound, k, j, turn in scored:
+            if len(layer) >= width or bound >= search.bound() or search.out_of_budget():
+                break
+            search.nodes += 1
+            child = _extend(search, parents[k], j, turn)
+            if child is None:
+                continue
+            end = np.round(child.end, 1).tolist()
+            key = (frozenset(child.order), child.order[-1], child.heading, *end)
+            if key not in seen:
+                seen.add(key)
+                layer.append(child)
+    for state in layer:
+        _close(search, state)
+
+
+def _bounds(
+    search: _Search, state: _State, remaining: tuple[int, ...], options: list[tuple[int, int]]
+) -> list[float]:
+    """Lower bound of the energy of every leaf below each child (piece, turn)."""
+    pieces, weights, noise = search.pieces, search.weights, search.noise
+    rest = list(remaining)
+    turning = state.turning + sum(pieces[i].turning for i in rest)
+    # Cheapest way into each piece left and into the loop's start, from a piece that can
+    # still precede it (the current last piece or another one left).
+    sources = [state.order[-1], *rest]
+    costs = search.junction[np.ix_(sources, [*rest, 0])]
+    entry = costs.min(axis=0)
+    entry_of = dict(zip(rest, entry[:-1].tolist(), strict=True))
+    entry_total = float(entry.sum())
+
+    rotation_floor = float(search.rotation_cost[rest].min(axis=1).sum())
+    # Closure: the gap the pieces left cannot make up (L1, by duality), against the largest
+    # variance the remaining junctions could add (Cauchy-Schwarz: |r|_1^2 <= sum r^2/v sum v).
+    js = [j for j, _ in options]
+    rotations = [(state.heading + turn - pieces[j].directions[0]) % 4 for j, turn in options]
+    ends = state.end + np.array(
+        [pieces[j].rotated[r][0][-1] for j, r in zip(js, rotations, strict=True)]
+    )
+    reach = search.reach[rest].sum(axis=0)
+    others = reach[None, :] - search.reach[js]
+    gaps = np.maximum(0.0, (-(ends @ _CLOSURE_DIRECTIONS.T) - others).max(axis=1))
+    junctions_left = len(rest) + 1
+    shift = max(abs(noise.straight_mean), 2 * abs(noise.turn_mean))
+    slack = float(np.abs(state.mean).sum()) + junctions_left * shift
+    worst = max(noise.straight_sigma**2, 2 * noise.turn_sigma**2) + 2 * noise.keypoint_sigma**2
+    total_var = float(state.var.sum()) + junctions_left * worst
+    closure = 0.5 * np.maximum(0.0, gaps - slack) ** 2 / total_var
+    # Every junction left adds the keypoint noise to both axes and at least a straight
+    # junction's spread to one of them; log is concave, so the least sum of logs puts all
+    # of the latter on one axis.
+    vx, vy = (state.var + junctions_left * noise.keypoint_sigma**2).tolist()
+    spread = junctions_left * noise.straight_sigma**2
+    closure += 0.5 * min(np.log(vx + spread) + np.log(vy), np.log(vx) + np.log(vy + spread))
+    base = state.energy(weights) + weights[_F["hull"]] * 4 + weights[_F["prior"]] * rotation_floor
+    out = []
+    for (j, turn), gap_cost in zip(options, closure.tolist(), strict=True):
+        owed = abs(4 - turning - turn) if search.require_closed else 0
+        bound = base + weights[_F["turns"]] * ((turn != 0) + owed)
+        bound += search.junction[state.order[-1], j] + entry_total - entry_of[j]
+        if search.require_closed:
+            bound += weights[_F["closure"]] * gap_cost
+        out.append(bound)
+    return out
+
+
+def _options(search: _Search, state: _State, remaining: tuple[int, ...]) -> list[tuple[int, int]]:
+    """(piece, junction turn) pairs allowed next by the turning number of a closed loop."""
+    k = len(remaining)
+    fixed = state.turning + sum(search.pieces[i].turning for i in remaining)
+    return [
+        (j, turn)
+        for j in remaining
+        for turn in _TURNS
+        # The loop's turns add up to +4; the k junctions after this one give +-1 each.
+        if not search.require_closed or abs(4 - fixed - turn) <= k
+    ]
+
+
+def _root(search: _Search) -> _State:
+    """The search's root: the first piece fixed at the origin with rotation 0."""
+    first = search.pieces[0]
+    pts, walls, samples = first.rotated[0]
+    trimmed = _trim_start(walls, pts[0], search.params.closure_overshoot)
+    return _State(
+        order=(0,),
+        rotations=(0,),
+        sources=(np.zeros(2),),
+        end=pts[-1].copy(),
+        heading=first.directions[-1],
+        turning=first.turning,
+        features=np.zeros(len(FEATURES)),
+        mean=np.zeros(2),
+        var=np.zeros(2),
+        walls=trimmed,
+        vertices=pts.copy(),
+        samples=samples,
+        box=_box(samples),
+    )
+
+
+def place_pieces(
+    pieces: Sequence[Piece],
+    params: PlacementParams = PlacementParams(),
+    hints: SiteHints | None = None,
+) -> Placement | None:
+    """Find the lowest-energy placements of the pieces in one counter-clockwise loop.
+
+    Parameters
+    ----------
+    pieces : chains with at least one wall each; the first is fixed (rotation 0, loop
+        position 0, source at the site origin), which removes the global symmetry. With
+        prior poses, put a piece that has one first.
+    params : energy weights, the displacement model, top-k and the node budget.
+    hints : prior poses and pair constraints, by piece id.
+
+    Returns
+    -------
+    Placement or None when no placement exists (not even an open one).
+    """
+    if not pieces:
+        return None
+    hints = hints or SiteHints()
+    n = len(pieces)
+    nodes = 0
+    search = None
+    for require_closed in (True, False):
+        # The open search (partial chains, when no closed loop was found) has a budget of
+        # its own: what the closed one spent must not leave nothing to place.
+        search = _Search(list(pieces), params, hints, require_closed)
+        root = _root(search)
+        if require_closed and params.beam_width > 0:
+            # A beam over the loop positions finds good loops of many pieces early and
+            # evenly; the depth-first passes then prune against them.
+            _beam(search, root, params.beam_width)
+        # Iterative broadening: cheap passes that follow only the most promising children
+        # spread good incumbents over the whole tree, so the full pass prunes early.
+        for breadth in (*_BROADENING, None):
+            search.breadth = breadth
+            _dfs(search, root, tuple(range(1, n)))
+            if search.truncated:
+                break
+        nodes += search.nodes
+        if search.top:
+            break
+    assert search is not None
+    if not search.top:
+        return None
+    ranked = [c for _, _, c in sorted(search.top, key=lambda item: -item[0])]
+    return Placement(
+        best=ranked[0],
+        translations=translations_of(pieces, ranked[0]),
+        alternatives=tuple(ranked[1:]),
+        nodes_searched=nodes,
+        exhaustive=not search.truncated,
+        closed=search.require_closed,
+    )
+
+
+def translations_of(pieces: Sequence[Piece], cand: PlacementCandidate) -> FloatArray:
+    """(n, 2) site position of each piece's source after end-to-end concatenation."""
+    by_id: Mapping[str, Piece] = {p.id: p for p in pieces}
+    end = np.zeros(2)
+    out = []
+    for fid, rotation in zip(cand.order, cand.rotations, strict=True):
+        out.append(end.copy())
+        end = end + by_id[fid].keypoints[-1] @ rot90(rotation).T
+    return np.asarray(out).reshape(-1, 2)
+
+
+def evaluate_placement(
+    pieces: Sequence[Piece],
+    order: Sequence[str],
+    rotations: Sequence[int],
+    params: PlacementParams = PlacementParams(),
+    hints: SiteHints | None = None,
+) -> PlacementCandidate | None:
+    """Energy of one given closed placement, or None when it is not a valid closed loop.
+
+    The same energy the search minimises; used to check the search against brute force,
+    to score the truth in benchmarks and a placement a user proposes.
+    """
+    by_id = {p.id: i for i, p in enumerate(pieces)}
+    if order[0] != pieces[0].id or rotations[0] != 0 or sorted(order) != sorted(by_id):
+        return None
+    one = params.model_copy(update={"top_k": 1})
+    search = _Search(list(pieces), one, hints or SiteHints(), True)
+    state = _root(search)
+    for fid, rotation in zip(order[1:], rotations[1:], strict=True):
+        j = by_id[fid]
+        turn = {0: 0, 1: 1, 3: -1}.get((rotation + pieces[j].directions[0] - state.heading) % 4)
+        child = None if turn is None else _extend(search, state, j, turn)
+        if child is None:
+            return None
+        state = child
+    _close(search, state)
+    return search.top[0][2] if search.top else None

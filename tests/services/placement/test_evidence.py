@@ -1,0 +1,232 @@
+"""Junction evidence: structure voxels at chain ends, their registration, boundary mismatch."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from schemas.params import PlacementParams
+from services.placement import Piece
+from services.placement.evidence import boundary_mismatch, end_voxels, register_ends
+from tests.conftest import bare_piece
+
+pytestmark = pytest.mark.timeout(120)
+
+CEILING = 2.6
+# A table (four legs and a top) and a wall cabinet, in the travel frame of a's target end:
+# x along the wall (the cut at x = 0), y into the room, z above the floor.
+FURNITURE = [
+    ((-0.62, 0.60, 0.00), (-0.55, 0.67, 0.75)),
+    ((0.48, 0.60, 0.00), (0.55, 0.67, 0.75)),
+    ((-0.62, 1.33, 0.00), (-0.55, 1.40, 0.75)),
+    ((0.48, 1.33, 0.00), (0.55, 1.40, 0.75)),
+    ((-0.62, 0.60, 0.72), (0.55, 1.40, 0.76)),
+    ((0.10, 0.20, 1.20), (0.35, 0.50, 1.60)),
+]
+SHELF = [((-0.8, 1.8, 1.6), (0.8, 2.2, 2.0))]  # something else entirely
+
+
+def _shell(rng: np.random.Generator, seen: tuple[float, float], n: int = 4000) -> np.ndarray:
+    """What every junction shares: the wall (y = 0), the floor and the ceiling."""
+    x = lambda: rng.uniform(*seen, n)  # noqa: E731
+    flat = lambda: rng.normal(0.0, 0.005, n)  # noqa: E731
+    wall = np.column_stack([x(), flat(), rng.uniform(0.0, CEILING, n)])
+    floor = np.column_stack([x(), rng.uniform(0.0, 2.5, n), flat()])
+    ceiling = np.column_stack([x(), rng.uniform(0.0, 2.5, n), CEILING + flat()])
+    return np.vstack([wall, floor, ceiling])
+
+
+def _boxes(rng, boxes, seen: tuple[float, float], shift: float = 0.0) -> np.ndarray:
+    """Points of boxes (a's frame) that a scan seeing ``seen`` (a's frame) has, in a frame
+    whose origin is ``shift`` along the wall from a's end."""
+    pts = np.vstack([rng.uniform(lo, hi, size=(3000, 3)) for lo, hi in boxes])
+    pts = pts[(pts[:, 0] >= seen[0]) & (pts[:, 0] <= seen[1])]
+    pts[:, 0] -= shift
+    return pts
+
+
+def _a_end(rng, boxes=FURNITURE):
+    """a: a straight chain ending at the cut, its scan reaching 0.8 m past its end."""
+    seen = (-1.0, 0.8)
+    piece = bare_piece("a", np.array([[-3.0, 0.0], [0.0, 0.0]]))
+    region = np.vstack([_shell(rng, seen), _boxes(rng, boxes, seen)]) if boxes else None
+    region = _shell(rng, seen) if region is None else region
+    return dataclasses.replace(piece, target_region=region, ceiling=CEILING)
+
+
+def _b_start(rng, boxes=FURNITURE, shift: float = 0.0):
+    """b: a straight chain starting ``shift`` past a's end (negative: they overlap), its scan
+    reaching 0.8 m before its start."""
+    seen_b = (-0.8, 1.0)
+    seen_a = (seen_b[0] + shift, seen_b[1] + shift)
+    piece = bare_piece("b", np.array([[0.0, 0.0], [3.0, 0.0]]))
+    parts = [_shell(rng, seen_b)]
+    if boxes:
+        parts.append(_boxes(rng, boxes, seen_a, shift))
+    return dataclasses.replace(piece, source_region=np.vstack(parts), ceiling=CEILING)
+
+
+# ---------------------------------------------------------------------------------------------
+# end_voxels
+# ---------------------------------------------------------------------------------------------
+
+
+def test_the_shared_planes_are_not_structure():
+    rng = np.random.default_rng(0)
+    bare = end_voxels(_a_end(rng, boxes=[]), "target")
+    assert bare.cells == 0
+    assert bare.seen[:2].all() and bare.seen[-2:].sum() == 0  # seen from -1.0 to 0.8 m
+    furnished = end_voxels(_a_end(rng), "target")
+    assert furnished.cells > 60
+    assert (furnished.grown >= furnished.occupied).all()
+    assert furnished.grown.sum() > furnished.cells
+
+
+def test_the_chain_own_walls_near_the_end_are_not_structure():
+    # The chain turns 1 m before its target: in the target's travel frame (+y) its first
+    # wall runs across the region at x = -1, y from 0 to 2.
+    rng = np.random.default_rng(1)
+    piece = bare_piece("c", np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0]]))
+    across = np.column_stack(
+        [rng.normal(-1.0, 0.005, 2000), rng.uniform(0.1, 2.0, 2000), rng.uniform(0.1, 2.4, 2000)]
+    )
+    turned = dataclasses.replace(piece, target_region=across, ceiling=CEILING)
+    assert end_voxels(turned, "target").cells == 0
+    # The same points in front of a straight chain are structure.
+    straight = bare_piece("s", np.array([[0.0, 0.0], [0.0, 1.0]]))
+    plain = dataclasses.replace(straight, target_region=across, ceiling=CEILING)
+    assert end_voxels(plain, "target").cells > 50
+
+
+def test_a_missing_ceiling_keeps_high_structure():
+    rng = np.random.default_rng(2)
+    high = np.column_stack([rng.uniform(-0.5, 0.5, 500), rng.uniform(0.5, 1.0, 500)])
+    high = np.column_stack([high, np.full(500, CEILING)])
+    piece = bare_piece("a", np.array([[-3.0, 0.0], [0.0, 0.0]]))
+    with_ceiling = dataclasses.replace(piece, target_region=high, ceiling=CEILING)
+    without = dataclasses.replace(piece, target_region=high, ceiling=None)
+    assert end_voxels(with_ceiling, "target").cells == 0  # on the ceiling plane
+    assert end_voxels(without, "target").cells > 0
+
+
+def test_an_end_without_points_is_empty():
+    empty = end_voxels(bare_piece("a", np.array([[0.0, 0.0], [1.0, 0.0]])), "source")
+    assert empty.cells == 0 and not empty.seen.any()
+
+
+# ---------------------------------------------------------------------------------------------
+# register_ends
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("shift", [-0.4, -0.15, 0.0, 0.25])
+def test_the_same_structure_registers_at_its_shift(shift):
+    rng = np.random.default_rng(10)
+    a = end_voxels(_a_end(rng), "target")
+    b = end_voxels(_b_start(rng, shift=shift), "source")
+    score, found = register_ends(a, b)
+    assert score < -0.9
+    assert abs(found - shift) <= 0.1 + 1e-9
+
+
+def test_different_structures_count_against_the_junction():
+    rng = np.random.default_rng(11)
+    a = end_voxels(_a_end(rng), "target")
+    b = end_voxels(_b_start(rng, boxes=SHELF), "source")
+    score, _ = register_ends(a, b)
+    assert score > 0.5
+
+
+def test_structure_on_one_side_only_counts_against_the_junction():
+    # b's scan saw the floor where a saw a table: the table is not there.
+    rng = np.random.default_rng(12)
+    a = end_voxels(_a_end(rng), "target")
+    b = end_voxels(_b_start(rng, boxes=[]), "source")
+    assert register_ends(a, b)[0] > 0.5
+
+
+def test_no_structure_gives_no_evidence():
+    rng = np.random.default_rng(13)
+    a = end_voxels(_a_end(rng, boxes=[]), "target")
+    b = end_voxels(_b_start(rng, boxes=[]), "source")
+    assert register_ends(a, b) == (0.0, 0.0)
+
+
+def test_ends_that_never_see_the_same_stretch_give_no_evidence():
+    # a saw only 0.75 to 1 m before its end, b only 0.75 to 1 m after its start: more apart
+    # than any overlap or gap the registration tries, so there is nothing to compare.
+    rng = np.random.default_rng(14)
+    box = [((-1.0, 0.6, 0.3), (-0.8, 1.2, 0.9))]
+    a_region = np.vstack([_shell(rng, (-1.0, -0.75)), _boxes(rng, box, (-1.0, -0.75))])
+    b_region = np.vstack([_shell(rng, (0.75, 1.0)), _boxes(rng, box, (-1.0, -0.75), -1.8)])
+    a_piece, b_piece = _a_end(rng), _b_start(rng)
+    a = end_voxels(dataclasses.replace(a_piece, target_region=a_region), "target")
+    b = end_voxels(dataclasses.replace(b_piece, source_region=b_region), "source")
+    assert a.cells > 10 and b.cells > 10
+    assert register_ends(a, b) == (0.0, 0.0)
+
+
+def test_little_matching_structure_weighs_less():
+    rng = np.random.default_rng(15)
+    small = [((0.1, 0.2, 1.2), (0.3, 0.4, 1.4))]  # a few voxels
+    strong = register_ends(end_voxels(_a_end(rng), "target"), end_voxels(_b_start(rng), "source"))[
+        0
+    ]
+    weak = register_ends(
+        end_voxels(_a_end(rng, boxes=small), "target"),
+        end_voxels(_b_start(rng, boxes=small), "source"),
+    )[0]
+    assert strong < weak < 0.0
+
+
+# ---------------------------------------------------------------------------------------------
+# boundary_mismatch (the paper's term)
+# ---------------------------------------------------------------------------------------------
+
+
+def _profile(rng, extra=None, x=(-0.1, 0.1), n=600) -> np.ndarray:
+    """Wall and floor in a cutting plane (within the 10 cm band), plus an optional box."""
+    parts = [
+        np.column_stack([rng.uniform(*x, n), rng.normal(0, 0.005, n), rng.uniform(0, 2.5, n)]),
+        np.column_stack([rng.uniform(*x, n), rng.uniform(0, 2.0, n), rng.normal(0, 0.005, n)]),
+    ]
+    if extra is not None:
+        (y0, y1), (z0, z1) = extra
+        parts.append(
+            np.column_stack([rng.uniform(*x, n), rng.uniform(y0, y1, n), rng.uniform(z0, z1, n)])
+        )
+    return np.vstack(parts)
+
+
+def _pair(source_region, target_region) -> tuple[Piece, Piece]:
+    chain = np.array([[0.0, 0.0], [3.0, 0.0]])
+    a = dataclasses.replace(bare_piece("a", chain), target_region=target_region)
+    b = dataclasses.replace(bare_piece("b", chain), source_region=source_region)
+    return a, b
+
+
+def test_boundary_mismatch_of_the_same_profile_is_low():
+    rng = np.random.default_rng(20)
+    params = PlacementParams()
+    same = boundary_mismatch(*_pair(_profile(rng), _profile(rng)), params)
+    other = boundary_mismatch(
+        *_pair(_profile(rng, extra=((0.5, 1.5), (0.5, 1.5))), _profile(rng)), params
+    )
+    assert same < 0.1
+    assert other > 0.15 and other > same + 0.1
+    cabinet = np.column_stack(
+        [rng.uniform(-0.1, 0.1, 600), rng.uniform(0.8, 2.0, 600), rng.uniform(1.0, 2.5, 600)]
+    )
+    assert boundary_mismatch(*_pair(cabinet, _profile(rng)), params) > 0.9
+
+
+def test_boundary_mismatch_without_enough_points_in_the_band_is_neutral():
+    rng = np.random.default_rng(21)
+    params = PlacementParams()
+    few = _profile(rng)[:20]
+    assert boundary_mismatch(*_pair(few, _profile(rng)), params) == 0.5
+    # Points outside the band do not count, however many.
+    away = _profile(rng, x=(0.3, 1.0))
+    assert boundary_mismatch(*_pair(away, _profile(rng)), params) == 0.5

@@ -1,0 +1,470 @@
+"""The placement search: against brute force, pruning, budgets, determinism and hints."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from schemas.params import PlacementParams
+from services.placement import (
+    Piece,
+    SiteHints,
+    evaluate_placement,
+    place_pieces,
+    translations_of,
+)
+from services.placement.priors import HintPair, PiecePrior
+from tests.conftest import UNTUNED, bare_piece, chains_from_polygon
+
+pytestmark = pytest.mark.timeout(120)
+
+# Pieces without end regions or free space: only the chains' geometry and the hints count.
+GEOMETRY = UNTUNED.model_copy(
+    update={"use_boundary": False, "use_structure": False, "use_free_space": False}
+)
+L_PERIMETER = 28.0
+# The L room cut in the middle of walls of different lengths: every piece is distinct and
+# every junction is straight.
+DISTINCT_CUTS = [1.0, 9.5, 12.5, 20.0]
+# Cuts that make two pieces swappable: p0 p2 p1 p3 closes as well as the truth (another
+# room, same energy).
+TIED_CUTS = [1.0, 9.5, 14.0, 20.0]
+COMB = np.array(
+    [
+        [0, 0],
+        [10, 0],
+        [10, 6],
+        [8, 6],
+        [8, 3],
+        [6, 3],
+        [6, 6],
+        [4, 6],
+        [4, 3],
+        [2, 3],
+        [2, 6],
+        [0, 6],
+    ],
+    dtype=np.float64,
+)
+
+
+def _random_cuts(rng: np.random.Generator, n: int) -> list[float]:
+    """n cut positions on the L room's loop, at least 0.5 m apart."""
+    while True:
+        cuts = sorted(rng.uniform(0.0, L_PERIMETER, size=n).tolist())
+        if min(np.diff([*cuts, cuts[0] + L_PERIMETER])) > 0.5:
+            return cuts
+
+
+def _all_closed(pieces, params, hints=None):
+    """Every valid closed placement (brute force over orders and rotations)."""
+    rest = [p.id for p in pieces[1:]]
+    found = []
+    for perm in itertools.permutations(rest):
+        for rots in itertools.product(range(4), repeat=len(rest)):
+            cand = evaluate_placement(pieces, (pieces[0].id, *perm), (0, *rots), params, hints)
+            if cand is not None:
+                found.append(cand)
+    return found
+
+
+def _key(cand):
+    return (cand.order, tuple(cand.rotations))
+
+
+def _cut_points(polygon, cuts):
+    """Site positions of the cut points (sources of the pieces), relative to the first."""
+    closed = np.vstack([polygon, polygon[:1]])
+    cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(closed, axis=0), axis=1))])
+    out = []
+    for arc in cuts:
+        i = int(np.searchsorted(cum, arc, side="right") - 1)
+        t = (arc - cum[i]) / (cum[i + 1] - cum[i])
+        out.append(closed[i] + t * (closed[i + 1] - closed[i]))
+    return np.array(out)
+
+
+# ---------------------------------------------------------------------------------------------
+# Against brute force
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_search_finds_the_brute_force_minimum(l_room, seed):
+    rng = np.random.default_rng(seed)
+    n = 4 if seed % 2 else 3
+    pieces = chains_from_polygon(l_room, _random_cuts(rng, n), rng.integers(0, 4, n).tolist())
+    params = GEOMETRY.model_copy(update={"top_k": 500})
+    placement = place_pieces(pieces, params)
+    every = _all_closed(pieces, params)
+    assert placement is not None and every
+    assert placement.closed and placement.exhaustive
+    lowest = min(c.energy for c in every)
+    assert placement.best.energy == pytest.approx(lowest, abs=1e-9)
+    # With room for all of them, the search keeps exactly the placements within the window.
+    within = {_key(c) for c in every if c.energy <= lowest + params.energy_window}
+    assert {_key(c) for c in placement.candidates} == within
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_search_with_priors_finds_the_brute_force_minimum(l_room, seed):
+    # Priors near the truth, in a hints frame turned by 30 degrees: the prior costs enter
+    # the bounds, which must stay lower bounds.
+    rng = np.random.default_rng(100 + seed)
+    cuts = _random_cuts(rng, 4)
+    turns = rng.integers(0, 4, 4).tolist()
+    pieces = chains_from_polygon(l_room, cuts, turns)
+    hints = _truth_priors(l_room, cuts, turns, rng, noise=(0.8, 0.3))
+    placement = place_pieces(pieces, GEOMETRY, hints)
+    every = _all_closed(pieces, GEOMETRY, hints)
+    assert placement is not None and placement.exhaustive
+    assert placement.best.energy == pytest.approx(min(c.energy for c in every), abs=1e-9)
+    assert placement.best.features["prior"] > 0.0  # the priors did take part
+
+
+def _truth_priors(polygon, cuts, turns, rng=None, noise=(0.0, 0.0), frame=(0.5, (3.0, -1.0))):
+    """Prior per piece from the truth: the piece made with ``turns[k]`` quarter turns sits
+    turned back by them; the hints frame is the polygon's turned by frame[0], shifted."""
+    yaw0, shift = frame
+    c, s = math.cos(yaw0), math.sin(yaw0)
+    turn = np.array([[c, -s], [s, c]])
+    sources = _cut_points(polygon, cuts)
+    priors = {}
+    for k, quarter in enumerate(turns):
+        dxy = np.zeros(2) if rng is None else rng.normal(0.0, noise[0], 2)
+        dyaw = 0.0 if rng is None else rng.normal(0.0, noise[1])
+        priors[f"p{k}"] = PiecePrior(
+            yaw=yaw0 - quarter * math.pi / 2 + dyaw,
+            source=turn @ sources[k] + np.array(shift) + dxy,
+            sigma_xy=1.0,
+            sigma_yaw=0.35,
+        )
+    return SiteHints(priors=priors)
+
+
+# ---------------------------------------------------------------------------------------------
+# What the search returns
+# ---------------------------------------------------------------------------------------------
+
+
+def test_recovers_order_rotations_and_translations_of_a_cut_room(l_room):
+    pieces = chains_from_polygon(l_room, DISTINCT_CUTS, [0, 1, 2, 3])
+    shuffled = [pieces[0], pieces[3], pieces[1], pieces[2]]
+    placement = place_pieces(shuffled, GEOMETRY)
+    assert placement is not None and placement.closed and placement.exhaustive
+    best = placement.best
+    assert best.order == ("p0", "p1", "p2", "p3")
+    assert list(best.rotations) == [0, 3, 2, 1]  # each piece's turn undone
+    assert best.missing == 0 and best.violated_pairs == ()
+    assert best.features["turns"] == 0  # every cut is in the middle of a wall
+    assert best.features["hull"] == 5
+    points = _cut_points(l_room, DISTINCT_CUTS)
+    assert placement.translations == pytest.approx(points - points[0])
+    assert translations_of(shuffled, best) == pytest.approx(placement.translations)
+
+
+def test_candidates_are_distinct_and_sorted(l_room):
+    pieces = chains_from_polygon(l_room, [1.0, 9.5, 14.0, 20.0, 25.5], [0, 1, 2, 3, 1])
+    placement = place_pieces(pieces, GEOMETRY.model_copy(update={"top_k": 5}))
+    assert placement is not None
+    candidates = placement.candidates
+    assert len(candidates) == 5
+    assert len({_key(c) for c in candidates}) == 5
+    energies = [c.energy for c in candidates]
+    assert energies == sorted(energies)
+    assert candidates[0] is placement.best
+
+
+def test_top_k_keeps_the_lowest(l_room):
+    pieces = chains_from_polygon(l_room, _random_cuts(np.random.default_rng(1), 4), [0, 2, 1, 3])
+    every = sorted(_all_closed(pieces, GEOMETRY), key=lambda c: c.energy)
+    placement = place_pieces(pieces, GEOMETRY.model_copy(update={"top_k": 2}))
+    assert placement is not None
+    assert len(every) > 2 and len(placement.candidates) == 2
+    assert [c.energy for c in placement.candidates] == pytest.approx([c.energy for c in every[:2]])
+
+
+@pytest.mark.parametrize("window", [0.5, 2.0, 4.0])
+def test_energy_window_drops_unlikely_candidates(l_room, window):
+    pieces = chains_from_polygon(l_room, _random_cuts(np.random.default_rng(1), 4), [0, 2, 1, 3])
+    every = _all_closed(pieces, GEOMETRY)
+    lowest = min(c.energy for c in every)
+    params = GEOMETRY.model_copy(update={"top_k": 100, "energy_window": window})
+    placement = place_pieces(pieces, params)
+    assert placement is not None
+    got = {_key(c) for c in placement.candidates}
+    assert got == {_key(c) for c in every if c.energy <= lowest + window}
+    assert all(c.energy <= placement.best.energy + window for c in placement.candidates)
+
+
+def test_a_narrow_window_prunes_the_search():
+    # The window is a bound, not only a filter: assemblies that much less likely are not
+    # even looked for.
+    pieces = _comb_pieces(6)
+    nodes = []
+    for window in (0.5, 6.0, 50.0):
+        params = GEOMETRY.model_copy(update={"top_k": 100, "energy_window": window})
+        placement = place_pieces(pieces, params)
+        assert placement is not None and placement.exhaustive
+        nodes.append(placement.nodes_searched)
+    assert nodes[0] < nodes[1] < nodes[2]
+
+
+def _comb_pieces(n: int) -> list[Piece]:
+    rng = np.random.default_rng(3)
+    perimeter = 44.0
+    cuts = sorted((np.arange(n) * perimeter / n + rng.uniform(0.0, 1.0, n)).tolist())
+    return chains_from_polygon(COMB, cuts, rng.integers(0, 4, n).tolist())
+
+
+@pytest.mark.parametrize("budget", [1, 7, 50])
+def test_node_budget_is_respected(budget):
+    pieces = _comb_pieces(6)
+    full = place_pieces(pieces, GEOMETRY)
+    assert full is not None and full.exhaustive and full.nodes_searched > 200
+    limited = place_pieces(pieces, GEOMETRY.model_copy(update={"max_search_nodes": budget}))
+    assert limited is not None
+    # The closed search keeps to its budget; the open fallback has a budget of its own.
+    assert limited.nodes_searched <= budget + 1 + GEOMETRY.max_open_nodes + 1
+    assert not limited.exhaustive
+
+
+def test_same_input_same_result():
+    pieces = _comb_pieces(6)
+    for params in (GEOMETRY, GEOMETRY.model_copy(update={"max_search_nodes": 40})):
+        first, second = place_pieces(pieces, params), place_pieces(list(pieces), params)
+        assert first is not None and second is not None
+        assert first.nodes_searched == second.nodes_searched
+        assert first.exhaustive == second.exhaustive
+        assert [(_key(c), c.energy) for c in first.candidates] == [
+            (_key(c), c.energy) for c in second.candidates
+        ]
+        assert np.array_equal(first.translations, second.translations)
+
+
+# ---------------------------------------------------------------------------------------------
+# Hints
+# ---------------------------------------------------------------------------------------------
+
+
+def _square_quarters() -> list[Piece]:
+    """A 4 m square cut in the middle of each wall: four identical L pieces (every order of
+    them closes the same square)."""
+    square = np.array([[0, 0], [4, 0], [4, 4], [0, 4]], dtype=np.float64)
+    return chains_from_polygon(square, [2.0, 6.0, 10.0, 14.0], [0, 3, 2, 1])
+
+
+def test_pieces_of_equal_shape_tie():
+    pieces = _square_quarters()
+    assert all(np.allclose(p.keypoints, pieces[0].keypoints) for p in pieces)
+    placement = place_pieces(pieces, GEOMETRY)
+    assert placement is not None
+    energies = [c.energy for c in placement.candidates]
+    assert len(energies) == 6  # 3! orders of the other pieces
+    assert max(energies) == pytest.approx(min(energies))
+
+
+def test_an_order_hint_steers_a_tie():
+    pieces = _square_quarters()
+    free = place_pieces(pieces, GEOMETRY)
+    assert free is not None
+    # Ask for the other pieces in the reverse of the order the unhinted search picked.
+    wanted = ("p0", *reversed(free.best.order[1:]))
+    assert wanted != free.best.order
+    hints = SiteHints(pairs=tuple(HintPair(a, b, True) for a, b in itertools.pairwise(wanted)))
+    wide = GEOMETRY.model_copy(update={"energy_window": 20.0})  # keep hint breakers too
+    steered = place_pieces(pieces, wide, hints)
+    assert steered is not None
+    assert steered.best.order == wanted
+    assert steered.best.violated_pairs == ()
+    assert steered.best.energy == pytest.approx(free.best.energy)
+    # Assemblies that break the hint are still there, each broken pair costing its price.
+    broken = [c for c in steered.alternatives if c.violated_pairs]
+    assert {len(c.violated_pairs) for c in broken} >= {2, 3}
+    for cand in broken:
+        plain = evaluate_placement(pieces, cand.order, cand.rotations, wide)
+        assert plain is not None
+        price = wide.hint_pair_cost * len(cand.violated_pairs)
+        assert cand.energy == pytest.approx(plain.energy + price)
+
+
+def test_a_neighbour_hint_steers_a_tie_either_way_round():
+    pieces = _square_quarters()
+    free = place_pieces(pieces, GEOMETRY)
+    assert free is not None
+    # The piece opposite p0 in the unhinted best is to become p0's neighbour.
+    opposite = free.best.order[2]
+    for pair in (HintPair("p0", opposite, False), HintPair(opposite, "p0", False)):
+        steered = place_pieces(pieces, GEOMETRY, SiteHints(pairs=(pair,)))
+        assert steered is not None
+        assert steered.best.order.index(opposite) in (1, 3)  # p0 is first: next to 1 and 3
+        assert steered.best.violated_pairs == ()
+        assert steered.best.energy == pytest.approx(free.best.energy)
+
+
+def test_a_hint_the_scans_contradict_is_reported_not_obeyed(l_room):
+    # Three pieces of the L room: p2 directly after p0 closes the loop only at a high cost
+    # (turns, hull, a gap), far more than breaking the hint costs.
+    pieces = chains_from_polygon(l_room, [1.0, 9.5, 20.0], [0, 1, 2])
+    bad = HintPair("p0", "p2", True)
+    obeying = [c for c in _all_closed(pieces, GEOMETRY) if c.order[1] == "p2"]
+    truth = evaluate_placement(pieces, ["p0", "p1", "p2"], [0, 3, 2], GEOMETRY)
+    assert truth is not None and obeying
+    assert min(c.energy for c in obeying) > truth.energy + 2 * GEOMETRY.hint_pair_cost
+    placement = place_pieces(pieces, GEOMETRY, SiteHints(pairs=(bad,)))
+    assert placement is not None
+    assert placement.best.order == ("p0", "p1", "p2")
+    assert placement.best.violated_pairs == (bad,)
+    assert placement.best.energy == pytest.approx(truth.energy + GEOMETRY.hint_pair_cost)
+
+
+def test_hints_naming_absent_pieces_are_ignored(l_room):
+    pieces = chains_from_polygon(l_room, DISTINCT_CUTS, [0, 1, 2, 3])
+    hints = SiteHints(pairs=(HintPair("p0", "ghost", True), HintPair("ghost", "p1", False)))
+    plain, hinted = place_pieces(pieces, GEOMETRY), place_pieces(pieces, GEOMETRY, hints)
+    assert plain is not None and hinted is not None
+    assert _key(hinted.best) == _key(plain.best)
+    assert hinted.best.energy == pytest.approx(plain.best.energy)
+    assert hinted.best.violated_pairs == ()
+
+
+def test_two_tied_rooms(l_room):
+    pieces = chains_from_polygon(l_room, TIED_CUTS, [0, 1, 2, 3])
+    placement = place_pieces(pieces, GEOMETRY)
+    assert placement is not None
+    orders = [c.order for c in placement.candidates[:2]]
+    assert set(orders) == {("p0", "p1", "p2", "p3"), ("p0", "p2", "p1", "p3")}
+    assert placement.candidates[1].energy == pytest.approx(placement.candidates[0].energy)
+
+
+@pytest.mark.parametrize("frame", [(0.0, (0.0, 0.0)), (0.5, (3.0, -1.0)), (-2.0, (-7.0, 4.0))])
+def test_priors_pick_the_right_one_of_two_tied_rooms(l_room, frame):
+    turns = [0, 1, 2, 3]
+    pieces = chains_from_polygon(l_room, TIED_CUTS, turns)
+    hints = _truth_priors(l_room, TIED_CUTS, turns, frame=frame)
+    placement = place_pieces(pieces, GEOMETRY, hints)
+    assert placement is not None
+    assert placement.best.order == ("p0", "p1", "p2", "p3")
+    assert list(placement.best.rotations) == [0, 3, 2, 1]
+    assert placement.best.features["prior"] == pytest.approx(0.0, abs=1e-9)
+    runner_up = placement.alternatives[0]
+    assert runner_up.energy > placement.best.energy + 1.0
+
+
+def test_priors_pick_the_assignment_of_identical_pieces():
+    # Which of four identical pieces goes where is only known from the priors.
+    square = np.array([[0, 0], [4, 0], [4, 4], [0, 4]], dtype=np.float64)
+    cuts, turns = [2.0, 6.0, 10.0, 14.0], [0, 3, 2, 1]
+    pieces = chains_from_polygon(square, cuts, turns)
+    # Rename so the loop order is p0 p3 p1 p2.
+    names = {"p0": "p0", "p1": "p3", "p2": "p1", "p3": "p2"}
+    renamed = [dataclasses.replace(p, id=names[p.id]) for p in pieces]
+    truth = _truth_priors(square, cuts, turns, frame=(1.0, (2.0, 2.0)))
+    hints = SiteHints(priors={names[k]: v for k, v in truth.priors.items()})
+    ordered = sorted(renamed, key=lambda p: p.id)
+    free = place_pieces(ordered, GEOMETRY)
+    assert free is not None and free.best.order != ("p0", "p3", "p1", "p2")
+    placement = place_pieces(ordered, GEOMETRY, hints)
+    assert placement is not None
+    assert placement.best.order == ("p0", "p3", "p1", "p2")
+
+
+# ---------------------------------------------------------------------------------------------
+# Junction evidence in the search
+# ---------------------------------------------------------------------------------------------
+
+
+def test_structure_across_the_true_cuts_breaks_a_tie(l_room):
+    # Each true junction has its own object crossing the cut, seen by both scans.
+    rng = np.random.default_rng(0)
+    pieces = chains_from_polygon(l_room, TIED_CUTS, [0, 0, 0, 0])
+
+    def crossing(k: int) -> np.ndarray:
+        lo = np.array([-0.6, 0.3 + 0.5 * k, 0.2 + 0.5 * k])
+        legs = rng.uniform(lo, lo + np.array([0.1, 0.3, 0.3]), size=(1500, 3))
+        body = rng.uniform(
+            lo + np.array([0.3, 0.0, 0.0]), lo + np.array([1.1, 0.3, 0.3]), (3000, 3)
+        )
+        return np.vstack([legs, body])
+
+    objects = [crossing(k) for k in range(4)]
+    seen = [
+        dataclasses.replace(p, target_region=objects[k], source_region=objects[k - 1], ceiling=2.5)
+        for k, p in enumerate(pieces)
+    ]
+    params = PlacementParams(use_boundary=False, use_free_space=False)
+    placement = place_pieces(seen, params)
+    assert placement is not None
+    assert placement.best.order == ("p0", "p1", "p2", "p3")
+    assert placement.best.features["structure"] < -3.5
+    swapped = evaluate_placement(seen, ["p0", "p2", "p1", "p3"], [0, 0, 0, 0], params)
+    assert swapped is not None
+    assert swapped.energy > placement.best.energy + 2.0
+
+
+# ---------------------------------------------------------------------------------------------
+# Open chains and invalid placements
+# ---------------------------------------------------------------------------------------------
+
+
+def test_a_single_partial_piece_gives_an_open_placement():
+    square = np.array([[0, 0], [4, 0], [4, 4], [0, 4]], dtype=np.float64)
+    piece = chains_from_polygon(square, [1.0, 9.0], [0, 0])[0]
+    placement = place_pieces([piece], GEOMETRY)
+    assert placement is not None
+    assert not placement.closed
+    assert placement.best.order == (piece.id,)
+    assert placement.best.missing == 0
+    assert placement.translations == pytest.approx(np.zeros((1, 2)))
+
+
+def test_a_single_closed_piece_closes():
+    square = np.array([[0, 0], [4, 0], [4, 4], [0, 4]], dtype=np.float64)
+    whole = bare_piece("w", np.vstack([[2.0, 0.0], square[1:], square[:1], [[1.9, 0.0]]]))
+    placement = place_pieces([whole], GEOMETRY)
+    assert placement is not None and placement.closed
+
+
+def test_no_pieces_no_placement():
+    assert place_pieces([], GEOMETRY) is None
+
+
+def test_invalid_placements_are_rejected(l_room):
+    pieces = chains_from_polygon(l_room, DISTINCT_CUTS, [0, 0, 0, 0])
+    assert evaluate_placement(pieces, ["p0", "p1", "p2", "p3"], [0, 0, 0, 0], GEOMETRY)
+    # Folding a piece back onto the previous wall (a 180 degree junction) is not a loop.
+    assert evaluate_placement(pieces, ["p0", "p1", "p2", "p3"], [0, 2, 0, 0], GEOMETRY) is None
+    # The fixed piece must come first, unturned; every piece exactly once.
+    assert evaluate_placement(pieces, ["p1", "p0", "p2", "p3"], [0, 0, 0, 0], GEOMETRY) is None
+    assert evaluate_placement(pieces, ["p0", "p1", "p2", "p3"], [1, 1, 1, 1], GEOMETRY) is None
+    assert evaluate_placement(pieces, ["p0", "p1", "p2", "p2"], [0, 0, 0, 0], GEOMETRY) is None
+    assert evaluate_placement(pieces, ["p0", "p1", "p2"], [0, 0, 0], GEOMETRY) is None
+
+
+def test_crossing_walls_are_rejected(l_room):
+    # p3 right after p0 (a left turn at the junction) runs its long wall back through p0's.
+    pieces = chains_from_polygon(l_room, DISTINCT_CUTS, [0, 0, 0, 0])
+    assert evaluate_placement(pieces, ["p0", "p3", "p2", "p1"], [0, 0, 0, 0], GEOMETRY) is None
+
+
+def test_evaluate_placement_agrees_with_the_search(l_room):
+    pieces = chains_from_polygon(l_room, TIED_CUTS, [0, 1, 2, 3])
+    placement = place_pieces(pieces, GEOMETRY)
+    assert placement is not None
+    for cand in placement.candidates:
+        again = evaluate_placement(pieces, cand.order, cand.rotations, GEOMETRY)
+        assert again is not None
+        assert again.energy == pytest.approx(cand.energy)
+        assert again.features == pytest.approx(dict(cand.features))
+
+
+def test_a_piece_with_a_very_short_wall_does_not_crash(l_room):
+    # Cuts 5 cm apart leave a piece of a single 5 cm wall.
+    pieces = chains_from_polygon(l_room, [4.0, 14.3, 26.56, 26.61], [0, 1, 2, 3])
+    assert len(pieces[2].keypoints) == 2 and pieces[2].length < 0.1
+    placement = place_pieces(pieces, GEOMETRY)
+    assert placement is not None

@@ -1,0 +1,106 @@
+"""rank_assemblies: the placements found as distinct rooms with probabilities."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from services.confidence import rank_assemblies
+from services.geometry import signed_area
+from services.placement import Placement, PlacementCandidate, place_pieces, translations_of
+from tests.conftest import UNTUNED, chains_from_polygon
+
+pytestmark = pytest.mark.timeout(120)
+
+GEOMETRY = UNTUNED.model_copy(
+    update={"use_boundary": False, "use_structure": False, "use_free_space": False}
+)
+SQUARE = np.array([[0, 0], [4, 0], [4, 4], [0, 4]], dtype=np.float64)
+
+
+def _ranked(polygon, cuts, params=GEOMETRY):
+    pieces = chains_from_polygon(polygon, cuts, list(range(len(cuts))))
+    placement = place_pieces(pieces, params)
+    assert placement is not None and placement.closed
+    return pieces, placement, rank_assemblies(pieces, placement, params)
+
+
+def test_probabilities_are_sorted_and_leave_room_for_none_of_these(l_room):
+    _, placement, assemblies = _ranked(l_room, [1.0, 9.5, 12.5, 20.0])
+    assert len(assemblies) == len(placement.candidates) == 4  # four different rooms
+    probabilities = [a.probability for a in assemblies]
+    assert probabilities == sorted(probabilities, reverse=True)
+    assert all(0.0 < p < 1.0 for p in probabilities)
+    assert sum(probabilities) < 1.0
+    # Boltzmann: the ratio of two rooms' probabilities is e to their energy difference.
+    first, second = assemblies[0], assemblies[1]
+    ratio = first.probability / second.probability
+    assert ratio == pytest.approx(math.exp(second.candidate.energy - first.candidate.energy))
+    assert first.candidate == placement.best
+
+
+def test_swapped_identical_pieces_are_one_room():
+    # A square cut into a U and two identical L pieces: p0 p1 p2 and p0 p2 p1 are the same
+    # room, so they make one answer with both placements' weight.
+    _, placement, assemblies = _ranked(SQUARE, [2.0, 10.0, 14.0])
+    assert len(placement.candidates) == 2
+    assert len(assemblies) == 1
+    (only,) = assemblies
+    assert only.members == 2
+    unexplored = math.exp(-GEOMETRY.unexplored_energy)
+    assert only.probability == pytest.approx(2.0 / (2.0 + unexplored))
+
+
+def test_different_rooms_at_equal_energy_stay_apart(l_room):
+    *_, assemblies = _ranked(l_room, [1.0, 9.5, 14.0, 20.0])
+    orders = {a.candidate.order for a in assemblies[:2]}
+    assert orders == {("p0", "p1", "p2", "p3"), ("p0", "p2", "p1", "p3")}
+    assert all(a.members == 1 for a in assemblies)
+    assert assemblies[0].probability == pytest.approx(assemblies[1].probability)
+    assert assemblies[0].probability < 0.5
+
+
+def test_same_room_share_decides_what_is_one_room(l_room):
+    params = GEOMETRY.model_copy(update={"same_room_share": 10.0})  # everything is one room
+    _, placement, assemblies = _ranked(l_room, [1.0, 9.5, 14.0, 20.0], params)
+    assert len(assemblies) == 1
+    assert assemblies[0].members == len(placement.candidates) > 1
+
+
+def test_assembly_geometry_is_the_candidate_room(l_room):
+    pieces, _, assemblies = _ranked(l_room, [1.0, 9.5, 12.5, 20.0])
+    best = assemblies[0]
+    assert best.translations == pytest.approx(translations_of(pieces, best.candidate))
+    assert signed_area(best.polygon) == pytest.approx(39.0)  # the L room, counter-clockwise
+    assert len(best.polygon) == 6
+
+
+def _none_share(assemblies) -> float:
+    return 1.0 - sum(a.probability for a in assemblies)
+
+
+def test_none_of_these_share_follows_its_energy(l_room):
+    pieces = chains_from_polygon(l_room, [1.0, 9.5, 12.5, 20.0], [0, 1, 2, 3])
+    placement = place_pieces(pieces, GEOMETRY)
+    assert placement is not None
+    lowest = placement.best.energy
+    weights = sum(math.exp(-(c.energy - lowest)) for c in placement.candidates)
+    shares = []
+    for per_piece in (-0.5, -0.25, 0.0, 0.25):
+        params = GEOMETRY.model_copy(update={"unexplored_per_piece": per_piece})
+        share = _none_share(rank_assemblies(pieces, placement, params))
+        unexplored = math.exp(-(params.unexplored_energy + per_piece * len(pieces)))
+        assert share == pytest.approx(unexplored / (weights + unexplored))
+        shares.append(share)
+    # 'none of these' is an energy: the more it costs per piece, the smaller its share.
+    assert shares == sorted(shares, reverse=True) and len(set(shares)) == len(shares)
+
+
+def test_a_placement_without_complete_candidates_has_no_assemblies():
+    # An open chain that leaves a piece out is no room.
+    pieces = chains_from_polygon(SQUARE, [1.0, 5.0, 9.0], [0, 0, 0])
+    open_chain = PlacementCandidate(100.0, ("p0", "p1"), (0, 0), {}, missing=1)
+    placement = Placement(open_chain, np.zeros((2, 2)), (), 1, True, False)
+    assert rank_assemblies(pieces, placement, GEOMETRY) == []
