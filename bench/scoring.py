@@ -1,0 +1,77 @@
+"""Scoring helpers shared by the placement benchmarks: the true assembly of a scene, a
+candidate assembly as a result, and a result's alternatives as results of their own."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from services.layout_model import build_polygon
+from services.pipeline import fragment_pose
+from services.placement import Piece, PlacementCandidate, translations_of
+from services.refinement import refine_translations
+from services.types import LocalLayout
+
+__all__ = ["alternative_results", "candidate_result", "true_assembly"]
+
+
+def true_assembly(
+    truth: Mapping[str, Any], layouts: Mapping[str, LocalLayout], ids: Sequence[str]
+) -> tuple[list[str], list[int]]:
+    """Loop order (starting at ``ids[0]``) and quarter turns (relative to ``ids[0]``) of
+    the ground truth, for the pieces made of ``layouts[ids]``."""
+    frags = {f["id"]: f for f in truth["fragments"]}
+
+    def yaw(fid: str) -> float:
+        aligned_to_world = np.asarray(frags[fid]["pose"])[:3, :3] @ layouts[fid].frame.rotation.T
+        return math.atan2(aligned_to_world[1, 0], aligned_to_world[0, 0])
+
+    first = yaw(ids[0])
+    turns = {fid: round((yaw(fid) - first) / (math.pi / 2)) % 4 for fid in ids}
+    loop = sorted(ids, key=lambda fid: frags[fid]["loop_index"])
+    k = loop.index(ids[0])
+    order = loop[k:] + loop[:k]
+    return order, [turns[fid] for fid in order]
+
+
+def candidate_result(
+    cand: PlacementCandidate, pieces: Sequence[Piece], layouts: Mapping[str, LocalLayout]
+) -> dict[str, Any]:
+    """A candidate as a result JSON (poses and floorplan after refinement, as the pipeline
+    would report it), for :func:`services.evaluation.evaluate_result`."""
+    by_id = {p.id: p for p in pieces}
+    chains = [by_id[fid] for fid in cand.order]
+    translations = translations_of(pieces, cand)
+    refined = refine_translations(chains, cand.rotations, translations)
+    if refined.status == "solved" or refined.status.startswith("relaxed"):
+        translations = refined.translations
+    fragments = [
+        {
+            "id": fid,
+            "placed": True,
+            "pose": fragment_pose(layouts[fid], rotation, translations[k]).tolist(),
+            "local_layout": {"keypoints": layouts[fid].keypoints_local().tolist()},
+        }
+        for k, (fid, rotation) in enumerate(zip(cand.order, cand.rotations, strict=True))
+    ]
+    polygon = build_polygon(chains, cand.rotations, translations)
+    return {
+        "fragments": fragments,
+        "floorplan": {"rooms": [{"id": "r", "polygon": polygon.tolist()}]},
+    }
+
+
+def alternative_results(result: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """Each alternative of a result JSON as a result of its own (local layouts kept)."""
+    out = []
+    for alternative in result.get("alternatives", []):
+        poses = {f["id"]: f["pose"] for f in alternative["fragments"]}
+        fragments = [
+            {**f, "pose": poses.get(f["id"]), "placed": f["id"] in poses}
+            for f in result["fragments"]
+        ]
+        out.append({"fragments": fragments, "floorplan": alternative["floorplan"]})
+    return out

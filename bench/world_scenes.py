@@ -1,0 +1,158 @@
+"""Scenes as hard as the world, with their local layouts, cached as JSON (issue 10).
+
+Two families on the generator's :meth:`~services.synthetic.SceneSpec.world` preset: random
+room shapes cut into a number of fragments per bucket (2-3, 4-5, 6-8, 9-12, 13-16), and
+real room outlines (MatterportLayout, ``bench/room_shapes.py``) cut into 2 to 8. Each has
+a "tune" split (weights and calibration are fitted there) and a "test" split (figures are
+reported there): different seeds, and for real shapes different houses.
+
+The local layouts are the expensive part, so each scene's ground truth and layouts are
+cached under ``out/bench-cache/<set>/<seed>.json`` (versioned JSON; the layout wire form of
+the service), and reused by every placement configuration.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import time
+from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from bench.room_shapes import DEFAULT_PATH, load_room_shapes, split_houses
+from schemas.layout import LocalLayoutWire
+from services.pipeline import estimate_layout
+from services.synthetic import SceneSpec, generate_scene, ground_truth_json
+from services.types import LocalLayout
+
+__all__ = [
+    "BUCKETS",
+    "CACHE_VERSION",
+    "CachedScene",
+    "Split",
+    "bucket_of",
+    "build_sets",
+    "load_set",
+    "scene_jobs",
+]
+
+Split = Literal["tune", "test"]
+BUCKETS = ((2, 3), (4, 5), (6, 8), (9, 12), (13, 16))
+CACHE_VERSION = 1
+DEFAULT_CACHE = Path(__file__).resolve().parents[1] / "out" / "bench-cache"
+_SEED_BASE = {"tune": 100_000, "test": 200_000}
+_REAL_OFFSET = 5_000
+_BUCKET_STRIDE = 1_000
+
+
+@dataclass(frozen=True)
+class CachedScene:
+    """A scene's ground truth (``ground_truth_json``) and its fragments' local layouts."""
+
+    name: str
+    truth: dict[str, Any]
+    layouts: dict[str, LocalLayout]
+    seconds_layout: float
+
+    @property
+    def seed(self) -> int:
+        return int(self.truth["seed"])
+
+    @property
+    def n_fragments(self) -> int:
+        return len(self.truth["fragments"])
+
+
+def bucket_of(n: int) -> str:
+    """The fragment-count bucket of a scene, e.g. "6-8"."""
+    for lo, hi in BUCKETS:
+        if lo <= n <= hi:
+            return f"{lo}-{hi}"
+    return f"{n}"
+
+
+@dataclass(frozen=True)
+class _Job:
+    name: str
+    seed: int
+    n_range: tuple[int, int]
+    outline: list[list[float]] | None
+    path: str
+
+
+def scene_jobs(split: Split, per_bucket: int, real: int, cache: Path = DEFAULT_CACHE) -> list[_Job]:
+    """The scenes of one split: ``per_bucket`` random rooms per bucket, ``real`` real ones."""
+    base = _SEED_BASE[split]
+    jobs = []
+    if real:
+        raw = json.loads(DEFAULT_PATH.read_text())
+        tune, test = split_houses(str(e["house"]) for e in raw)
+        shapes = load_room_shapes(houses=tune if split == "tune" else test)
+        picks = np.random.default_rng(base).choice(len(shapes), real, replace=False)
+        for k, index in enumerate(picks):
+            seed = base + _REAL_OFFSET + k
+            path = cache / f"{split}_real" / f"{seed}.json"
+            jobs.append(_Job(f"{split}_real", seed, (2, 8), shapes[index][1].tolist(), str(path)))
+    for b, (lo, hi) in enumerate(BUCKETS):
+        for k in range(per_bucket):
+            seed = base + _BUCKET_STRIDE * b + k
+            path = cache / f"{split}_syn" / f"{seed}.json"
+            jobs.append(_Job(f"{split}_syn", seed, (lo, hi), None, str(path)))
+    return jobs
+
+
+def _build(job: _Job) -> str:
+    """Generate one scene, estimate its layouts and write the cache file (atomically)."""
+    if os.path.exists(job.path):
+        return job.path
+    spec = dataclasses.replace(SceneSpec.world(), n_fragments_range=job.n_range)
+    start = time.perf_counter()
+    outline = None if job.outline is None else np.asarray(job.outline, dtype=np.float64)
+    scene = generate_scene(spec, job.seed, outline=outline)
+    layouts = {
+        f.id: LocalLayoutWire.from_layout(estimate_layout(f.points)).model_dump()
+        for f in scene.fragments
+    }
+    record = {
+        "version": CACHE_VERSION,
+        "truth": ground_truth_json(scene),
+        "layouts": layouts,
+        "seconds": time.perf_counter() - start,
+    }
+    os.makedirs(os.path.dirname(job.path), exist_ok=True)
+    with open(job.path + ".tmp", "w") as handle:
+        json.dump(record, handle)
+    os.replace(job.path + ".tmp", job.path)
+    return job.path
+
+
+def build_sets(
+    jobs: list[_Job], workers: int = 2, report: Callable[[str], None] = lambda line: None
+) -> None:
+    """Build every scene not cached yet, ``workers`` processes at a time."""
+    missing = [job for job in jobs if not os.path.exists(job.path)]
+    if not missing:
+        return
+    with ProcessPoolExecutor(workers) as pool:
+        for done, path in enumerate(pool.map(_build, missing), start=1):
+            report(f"{done}/{len(missing)} {path}")
+
+
+def load_set(jobs: list[_Job]) -> Iterator[CachedScene]:
+    """The cached scenes of ``jobs``, in order."""
+    for job in jobs:
+        record = json.loads(Path(job.path).read_text())
+        if record.get("version") != CACHE_VERSION:
+            raise ValueError(
+                f"{job.path}: cache version {record.get('version')}, want {CACHE_VERSION}"
+            )
+        layouts = {
+            fid: LocalLayoutWire(**wire).to_layout() for fid, wire in record["layouts"].items()
+        }
+        yield CachedScene(job.name, record["truth"], layouts, float(record["seconds"]))
