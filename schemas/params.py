@@ -124,6 +124,12 @@ class PlacementParams(_Frozen):
         "length (at least 1 m), for the loop to count as closed; a larger gap means walls are "
         "missing, and the refinement would only hide it",
     )
+    straight_junction_slack: float = Field(
+        0.5,
+        ge=0,
+        description="what each straight junction may add to that gap: an overlap or gap "
+        "between neighbouring scans, unseen wall at a door, m",
+    )
     closure_overshoot: float = Field(
         1.5,
         gt=0,
@@ -171,7 +177,7 @@ class PlacementParams(_Frozen):
         "conflict, its hidden corners, search truncated); (0, 1, 0, ...) is the share itself",
     )
     closed_confidence: float = Field(
-        0.9,
+        0.95,
         gt=0,
         le=1,
         description="confidence at or above which a closed loop is reported 'closed'; below "

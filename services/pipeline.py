@@ -132,23 +132,33 @@ def _concrete(
         for k, (fid, rotation) in enumerate(zip(cand.order, cand.rotations, strict=True))
     }
     polygon = None
-    loop_length = sum(p.length for p in ordered)
-    gap_limit = max(1.0, params.placement.max_closure_share * loop_length)
-    gap = float(np.abs(translations[-1] + _end_vector(ordered[-1], cand.rotations[-1])).sum())
     if (
         cand.missing == 0
         and len(ordered) >= 2
-        and gap <= gap_limit
-        and refined.status == "solved"
+        and _gap(ordered, cand, translations) <= _gap_limit(ordered, cand, params)
+        and refined.status != "skipped: open chain"
+        and not refined.status.startswith("fallback")
         and refined.violation_after <= params.placement.closure_tolerance
     ):
         polygon = build_polygon(ordered, cand.rotations, refined.translations)
     return _Placed(assembly, cand, refined, poses, polygon)
 
 
-def _end_vector(piece: Piece, rotation: int) -> FloatArray:
-    end: FloatArray = rot90(rotation) @ piece.keypoints[-1]
-    return end
+def _gap(ordered: Sequence[Piece], cand: PlacementCandidate, translations: FloatArray) -> float:
+    """Manhattan length of the gap left at the loop's end before refinement, m."""
+    end = translations[-1] + rot90(cand.rotations[-1]) @ ordered[-1].keypoints[-1]
+    return float(np.abs(end).sum())
+
+
+def _gap_limit(ordered: Sequence[Piece], cand: PlacementCandidate, params: PipelineParams) -> float:
+    """Largest gap a loop may leave and still count as closed: a share of its wall length
+    (at least 1 m), plus what each straight junction may hide along its wall (the
+    neighbours' overlap or gap, unseen wall at a door)."""
+    placement = params.placement
+    loop_length = sum(p.length for p in ordered)
+    straight = len(ordered) - int(cand.features.get("turns", 0.0))
+    base = max(1.0, placement.max_closure_share * loop_length)
+    return base + placement.straight_junction_slack * straight
 
 
 def _to_hints_frame(
@@ -341,16 +351,21 @@ def place_site(
         fragments[fid].loop_index = index
     height = _room_height([layouts[fid] for fid in usable])
     contradicted = _contradicted_hints(main, site_hints, layouts)
+    diagnostics = _diagnostics(placement, main, assemblies, contradicted)
+    if status == "open" and main.polygon is not None:
+        diagnostics["unconfirmed_polygon"] = main.polygon.tolist()
     report("done", 1.0)
     return ResultModel(
         status=status,
         confidence=confidence,
         fragments=list(fragments.values()),
-        floorplan=_rooms(main.polygon, height),
+        # An open result has no room (contract section 3): a loop we could close but do not
+        # trust stays in the diagnostics.
+        floorplan=_rooms(main.polygon if status != "open" else None, height),
         alternatives=[_alternative(alt, height) for alt in alternatives]
         if status != "open"
         else [],
-        diagnostics=_diagnostics(placement, main, assemblies, contradicted),
+        diagnostics=diagnostics,
     )
 
 

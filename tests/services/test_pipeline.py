@@ -341,3 +341,20 @@ def test_a_contradicted_prior_does_not_move_the_others():
         if fid != moved:
             assert distance < 0.3
             assert yaw < 2.0
+
+
+def test_two_pieces_that_close_within_the_tolerance_make_a_room():
+    # A 10 x 6 m room in two pieces: one sees all but 3.5 m of the bottom wall, the other
+    # 1.2 m of it, 0.5 m from the first and 1.8 m short of it (a door, clutter at its
+    # end). The loop's 2.3 m gap lies along that wall, which straight junctions may hide.
+    frame = ManhattanFrame(rotation=np.eye(3), floor_z=0.0, ceiling_z=2.7)
+    most = np.array([[4.0, 0.0], [10.0, 0.0], [10.0, 6.0], [0.0, 6.0], [0.0, 0.0], [0.5, 0.0]])
+    wall = np.array([[1.0, 0.0], [2.2, 0.0]])
+    layouts = {
+        "most": LocalLayout(keypoints=most, frame=frame),
+        "wall": LocalLayout(keypoints=wall, frame=frame),
+    }
+    result = place_site(layouts)
+    assert result.status == "closed"
+    polygon = np.array(result.floorplan.rooms[0].polygon)
+    assert abs(signed_area(polygon)) == pytest.approx(60.0, rel=0.05)
