@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import itertools
+import json
 import math
 import sys
 import time
