@@ -79,8 +79,12 @@ def _gone(pid: int) -> bool:
         os.kill(pid, 0)
     except ProcessLookupError:
         return True
-    # A zombie (exited, not yet reaped by its parent) is gone too.
-    return Path(f"/proc/{pid}/stat").read_text().split()[2] == "Z"
+    # A zombie (exited, not yet reaped by its parent) is gone too, and so is a process
+    # reaped between the two looks.
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split()[2] == "Z"
+    except FileNotFoundError:
+        return True
 
 
 def test_restarts_keep_accepted_fragments_and_results(tmp_path: Path, scene) -> None:
