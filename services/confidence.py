@@ -104,7 +104,7 @@ def calibration_features(
 
 
 def rank_assemblies(
-    pieces: Sequence[Piece], placement: Placement, params: PlacementParams
+    pieces: Sequence[Piece], placement: Placement, params: PlacementParams, known: int = 0
 ) -> list[Assembly]:
     """The distinct closed assemblies of a placement, most probable first.
 
@@ -113,6 +113,9 @@ def rank_assemblies(
     pieces : the pieces the placement was searched over.
     placement : a closed placement (its candidates place every piece).
     params : same-room share, 'none of these' energy, calibration coefficients.
+    known : pieces whose place a prior pose tells. The 'none of these' share and the
+        calibration grow with the pieces the search had to place itself (fitted without
+        hints); a piece the fleet already placed is not one of those.
 
     Returns
     -------
@@ -126,15 +129,14 @@ def rank_assemblies(
     weights = np.zeros(len(polygons))
     for cand, group in zip(complete, groups, strict=True):
         weights[group] += math.exp(-(cand.energy - lowest))
-    unexplored = params.unexplored_energy + params.unexplored_per_piece * len(pieces)
+    free = max(1, len(pieces) - known)
+    unexplored = params.unexplored_energy + params.unexplored_per_piece * free
     shares = weights / (weights.sum() + math.exp(-unexplored))
     firsts = [complete[groups.index(g)] for g in range(len(polygons))]
     members = np.bincount(groups, minlength=len(polygons))
     order = sorted(range(len(polygons)), key=lambda g: (-shares[g], firsts[g].energy))
     main = order[0]
-    inputs = calibration_features(
-        float(shares[main]), firsts[main], len(pieces), not placement.exhaustive
-    )
+    inputs = calibration_features(float(shares[main]), firsts[main], free, not placement.exhaustive)
     z = float(np.asarray(params.confidence_coefficients) @ inputs)
     confidence = 1.0 / (1.0 + math.exp(-z))
     rest = max(1.0 - float(shares[main]), 1e-12)

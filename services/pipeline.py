@@ -108,7 +108,7 @@ def _root_first(usable: list[str], hints: SiteHints) -> list[str]:
     follows the hints' frame most closely); else the first fragment."""
     if not hints.priors:
         return usable
-    root = min(hints.priors, key=lambda fid: (hints.priors[fid].sigma_xy, fid))
+    root = min(hints.priors, key=lambda fid: (hints.priors[fid].source_sigma, fid))
     return [root, *(fid for fid in usable if fid != root)]
 
 
@@ -197,7 +197,7 @@ def _contradicted_hints(
         distance = float(np.linalg.norm(source - prior.source))
         to_hints = pose[:3, :3] @ layouts[fid].frame.rotation.T
         yaw_error = abs(wrap_angle(float(np.arctan2(to_hints[1, 0], to_hints[0, 0])) - prior.yaw))
-        if distance > 3 * prior.sigma_xy or yaw_error > 3 * prior.sigma_yaw:
+        if distance > 3 * prior.source_sigma or yaw_error > 3 * prior.sigma_yaw:
             out.append(
                 {
                     "kind": "pose",
@@ -263,11 +263,13 @@ def _choose(
     pieces: Mapping[str, Piece],
     placement: Placement,
     params: PipelineParams,
+    hints: SiteHints,
 ) -> tuple[_Placed, list[_Placed], list[Assembly]]:
     """The main assembly and the alternatives worth reporting, made concrete."""
     piece_list = list(pieces.values())
+    known = sum(fid in hints.priors for fid in pieces)
     assemblies = (
-        rank_assemblies(piece_list, placement, params.placement) if placement.closed else []
+        rank_assemblies(piece_list, placement, params.placement, known) if placement.closed else []
     )
     if not assemblies:
         main = _concrete(layouts, pieces, placement.best, placement.translations, params)
@@ -279,10 +281,24 @@ def _choose(
     closing = [c for c in concrete if c.polygon is not None]
     if not closing:
         return concrete[0], [], assemblies
-    main, rest = closing[0], closing[1:]
-    floor = params.placement.min_alternative_probability
-    kept = [c for c in rest if c.assembly is not None and c.assembly.probability >= floor]
-    return main, kept[: params.placement.max_alternatives], assemblies
+    return closing[0], closing[1:], assemblies
+
+
+def _reported(
+    alternatives: Sequence[_Placed], status: str, params: PipelineParams
+) -> list[_Placed]:
+    """The alternatives a result shows: those not too improbable, at most a few; an
+    ambiguous result always shows its runner-up, however improbable."""
+    placement = params.placement
+    kept = [
+        alt
+        for alt in alternatives
+        if alt.assembly is not None
+        and alt.assembly.probability >= placement.min_alternative_probability
+    ]
+    if status == "ambiguous" and not kept:
+        kept = list(alternatives[:1])
+    return kept[: placement.max_alternatives] if status != "open" else []
 
 
 def _status(
@@ -340,11 +356,12 @@ def place_site(
             diagnostics={"reason": "no fragment shows a wall"},
         )
     report("refinement", 0.7)
-    main, alternatives, assemblies = _choose(layouts, pieces, placement, params)
+    main, alternatives, assemblies = _choose(layouts, pieces, placement, params, site_hints)
     if site_hints.priors:
         main = _to_hints_frame(main, site_hints, layouts)
         alternatives = [_to_hints_frame(alt, site_hints, layouts) for alt in alternatives]
     status, confidence = _status(main, alternatives, len(usable), len(layouts), params)
+    alternatives = _reported(alternatives, status, params)
     for index, fid in enumerate(main.candidate.order):
         fragments[fid].placed = True
         fragments[fid].pose = main.poses[fid].tolist()

@@ -20,12 +20,15 @@ from schemas.hints import FragmentPrior
 from services.types import FloatArray, LocalLayout
 
 __all__ = [
+    "FrameEstimate",
     "HintPair",
     "PiecePrior",
     "SiteHints",
     "fit_frame",
+    "frame_estimate",
     "hint_pairs",
     "piece_prior",
+    "position_cost",
     "robust_cost",
     "wrap_angle",
 ]
@@ -42,12 +45,20 @@ class PiecePrior:
     yaw: angle (radians) of the piece's aligned x axis in the hints frame.
     source: (2,) hints-frame position of the chain's source keypoint.
     sigma_xy: meters; sigma_yaw: radians.
+    lever: distance from the source to the middle of what the scan saw, meters.
     """
 
     yaw: float
     source: FloatArray
     sigma_xy: float
     sigma_yaw: float
+    lever: float = 0.0
+
+    @property
+    def source_sigma(self) -> float:
+        """Standard deviation of the source's position: the prior's own, and what its yaw
+        error moves a point ``lever`` meters from the middle of the scan."""
+        return math.hypot(self.sigma_xy, self.lever * self.sigma_yaw)
 
 
 @dataclass(frozen=True)
@@ -74,7 +85,10 @@ def piece_prior(layout: LocalLayout, prior: FragmentPrior) -> PiecePrior:
     yaw = math.atan2(to_hints[1, 0], to_hints[0, 0])
     source_local = layout.keypoints_local()[0]
     source = pose[:3, :3] @ source_local + pose[:3, 3]
-    return PiecePrior(yaw, source[:2], prior.sigma_xy, math.radians(prior.sigma_yaw_deg))
+    seen = layout.footprint if len(layout.footprint) else layout.keypoints
+    lever = float(np.linalg.norm(seen.mean(axis=0) - layout.keypoints[0]))
+    yaw_sigma = math.radians(prior.sigma_yaw_deg)
+    return PiecePrior(yaw, source[:2], prior.sigma_xy, yaw_sigma, lever)
 
 
 def wrap_angle(angle: float) -> float:
@@ -106,7 +120,7 @@ def fit_frame(
     ids = [i for i in priors if i in rotations]
     offsets = np.array([wrap_angle(priors[i].yaw - rotations[i] * math.pi / 2) for i in ids])
     yaw_precision = np.array([1.0 / priors[i].sigma_yaw ** 2 for i in ids])
-    xy_precision = np.array([1.0 / priors[i].sigma_xy ** 2 for i in ids])
+    xy_precision = np.array([1.0 / priors[i].source_sigma ** 2 for i in ids])
     targets = np.array([priors[i].source for i in ids])
     placed = np.array([sources[i] for i in ids])
     weights = np.ones(len(ids))
@@ -124,6 +138,54 @@ def fit_frame(
             inliers = misfit < _OUTLIER_MISFIT
             weights = inliers.astype(np.float64) if inliers.any() else np.ones(len(ids))
     return yaw, shift
+
+
+@dataclass(frozen=True)
+class FrameEstimate:
+    """The site frame's yaw in the hints frame, from every prior at once.
+
+    The first piece is fixed (rotation 0), so each piece with a prior tells the yaw up to
+    its unknown quarter turns, which a prior of less than 45 degrees fixes.
+    yaw: radians; variance: rad^2 (the priors' yaw variances combined).
+    """
+
+    yaw: float
+    variance: float
+
+
+def frame_estimate(first: str, priors: Mapping[str, PiecePrior]) -> FrameEstimate | None:
+    """The frame yaw from the priors, relative to the piece ``first``; None without its prior."""
+    root = priors.get(first)
+    if root is None:
+        return None
+    offsets, weights = [], []
+    for prior in priors.values():
+        turns = round(wrap_angle(prior.yaw - root.yaw) / (math.pi / 2))
+        offsets.append(wrap_angle(prior.yaw - turns * math.pi / 2))
+        weights.append(1.0 / prior.sigma_yaw**2)
+    w = np.array(weights)
+    yaw = float(np.angle(np.sum(w * np.exp(1j * np.array(offsets)))))
+    return FrameEstimate(yaw, float(1.0 / w.sum()))
+
+
+def position_cost(anchors: Sequence[tuple[float, float, float]]) -> float:
+    """Robust misfit of the placed pieces' sources to their priors, the shift between the
+    frames fitted out (iteratively reweighted least squares, Cauchy loss).
+
+    anchors: per placed piece with a prior, (dx, dy, w): its prior source less its placed
+    source turned into the hints frame, and 1 / variance. Adding an anchor never lowers
+    the cost, so a partial assembly's cost bounds every completion's.
+    """
+    if len(anchors) < 2:
+        return 0.0
+    a = np.asarray(anchors)
+    d, w = a[:, :2], a[:, 2]
+    c = np.ones(len(a))
+    for _ in range(_REWEIGHTS):
+        shift = (c * w) @ d / float(c @ w)
+        misfit = w * np.sum((d - shift) ** 2, axis=1)
+        c = 1.0 / (1.0 + 0.5 * misfit / _ROBUST_SCALE)
+    return float(sum(robust_cost(m) for m in misfit))
 
 
 def _rotation(angle: float) -> FloatArray:

@@ -35,7 +35,15 @@ from services.placement.energy import (
 )
 from services.placement.evidence import boundary_mismatch, end_voxels, register_ends
 from services.placement.pieces import SAMPLE_SPACING, Piece, rot90, shift_walls
-from services.placement.priors import HintPair, SiteHints, robust_cost, wrap_angle
+from services.placement.priors import (
+    FrameEstimate,
+    HintPair,
+    SiteHints,
+    frame_estimate,
+    position_cost,
+    robust_cost,
+    wrap_angle,
+)
 from services.types import FloatArray
 
 __all__ = [
@@ -112,6 +120,7 @@ class _Search:
     structure: FloatArray = field(init=False)  # [a, b]: structure score of b after a
     boundary: FloatArray = field(init=False)  # [a, b]: boundary mismatch of b after a
     junction: FloatArray = field(init=False)  # [a, b]: weighted cost of the two
+    frame: FrameEstimate | None = field(init=False)  # the hints frame's yaw, from priors
     rotation_cost: FloatArray = field(init=False)  # [j, r]: prior cost of rotation r
     reach: FloatArray = field(init=False)  # [j, d]: piece j's reach along direction d
     displacement: list[list[tuple[FloatArray, FloatArray]]] = field(init=False)  # [in][out]
@@ -132,7 +141,8 @@ class _Search:
         if n > 1:
             np.fill_diagonal(cost, _SAME_PIECE)
         self.junction = cost
-        self.rotation_cost = _rotation_costs(self.pieces, self.hints)
+        self.frame = frame_estimate(self.pieces[0].id, self.hints.priors) if self.pieces else None
+        self.rotation_cost = _rotation_costs(self.pieces, self.hints, self.frame)
         self.displacement = [
             [junction_displacement(self.noise, h_in, h_out) for h_out in range(4)]
             for h_in in range(4)
@@ -195,40 +205,35 @@ def _pair_evidence(
     return structure, boundary
 
 
-def _rotation_costs(pieces: Sequence[Piece], hints: SiteHints) -> FloatArray:
-    """[j, r]: prior cost of piece j at rotation r, relative to the fixed first piece."""
+def _rotation_costs(
+    pieces: Sequence[Piece], hints: SiteHints, frame: FrameEstimate | None
+) -> FloatArray:
+    """[j, r]: prior cost of piece j at rotation r in the site frame."""
     costs = np.zeros((len(pieces), 4))
-    root = hints.priors.get(pieces[0].id) if pieces else None
-    if root is None:
+    if frame is None:
         return costs
     for j, piece in enumerate(pieces[1:], start=1):
         prior = hints.priors.get(piece.id)
         if prior is None:
             continue
-        variance = prior.sigma_yaw**2 + root.sigma_yaw**2
+        variance = prior.sigma_yaw**2 + frame.variance
         for r in range(4):
-            residual = wrap_angle(prior.yaw - root.yaw - r * np.pi / 2)
+            residual = wrap_angle(prior.yaw - frame.yaw - r * np.pi / 2)
             costs[j, r] = robust_cost(residual**2 / variance)
     return costs
 
 
-def _position_cost(search: _Search, j: int, source: FloatArray) -> float:
-    """Prior cost of piece j's source at ``source`` (site frame), relative to the first
-    piece's prior; the site frame's yaw in the hints frame is the first piece's prior yaw."""
-    priors = search.hints.priors
-    root, prior = priors.get(search.pieces[0].id), priors.get(search.pieces[j].id)
-    if root is None or prior is None or j == 0:
-        return 0.0
-    c, s = np.cos(root.yaw), np.sin(root.yaw)
-    placed = np.array([[c, -s], [s, c]]) @ source  # the root's source is the site origin
-    expected = prior.source - root.source
-    variance = (
-        prior.sigma_xy**2
-        + root.sigma_xy**2
-        + float(expected @ expected) * (root.sigma_yaw**2 / max(len(priors), 1))
-    )
-    residual = placed - expected
-    return robust_cost(float(residual @ residual) / variance)
+def _anchor(search: _Search, j: int, source: FloatArray) -> tuple[float, float, float] | None:
+    """Piece j's prior against its placed source (site frame), for :func:`position_cost`."""
+    frame, prior = search.frame, search.hints.priors.get(search.pieces[j].id)
+    if frame is None or prior is None:
+        return None
+    c, s = np.cos(frame.yaw), np.sin(frame.yaw)
+    turned = np.array([[c, -s], [s, c]]) @ source
+    # The frame's yaw is uncertain: the further from the first piece, the more it moves.
+    variance = prior.source_sigma**2 + float(source @ source) * frame.variance
+    dx, dy = (prior.source - turned).tolist()
+    return (dx, dy, 1.0 / variance)
 
 
 @dataclass(frozen=True)
@@ -248,6 +253,8 @@ class _State:
     box: tuple[float, float, float, float]  # their bounds (x_lo, y_lo, x_hi, y_hi)
     violated: tuple[int, ...] = ()  # indices of broken hint pairs
     resolved: frozenset[int] = frozenset()  # hint pairs already decided
+    rotation_prior: float = 0.0  # prior cost of the placed pieces' rotations
+    anchors: tuple[tuple[float, float, float], ...] = ()  # see priors.position_cost
 
     def energy(self, weights: FloatArray) -> float:
         return float(weights @ self.features)
@@ -361,8 +368,10 @@ def _extend(search: _Search, state: _State, j: int, turn: int) -> _State | None:
     features[_F["structure"]] += search.structure[prev, j]
     features[_F["boundary"]] += search.boundary[prev, j]
     features[_F["conflict"]] += _conflict(search, state, j, rotation, samples)
-    features[_F["prior"]] += search.rotation_cost[j, rotation]
-    features[_F["prior"]] += _position_cost(search, j, state.end)
+    rotations_cost = state.rotation_prior + search.rotation_cost[j, rotation]
+    anchor = _anchor(search, j, state.end)
+    anchors = state.anchors if anchor is None else (*state.anchors, anchor)
+    features[_F["prior"]] = rotations_cost + position_cost(anchors)
     child = _State(
         order=(*state.order, j),
         rotations=(*state.rotations, rotation),
@@ -379,6 +388,8 @@ def _extend(search: _Search, state: _State, j: int, turn: int) -> _State | None:
         box=_union(state.box, _box(samples)),
         violated=state.violated,
         resolved=state.resolved,
+        rotation_prior=rotations_cost,
+        anchors=anchors,
     )
     if search.pairs:
         violated, resolved = _resolve_pairs(search, child, {})
@@ -561,6 +572,7 @@ def _root(search: _Search) -> _State:
         vertices=pts.copy(),
         samples=samples,
         box=_box(samples),
+        anchors=tuple(a for a in (_anchor(search, 0, np.zeros(2)),) if a is not None),
     )
 
 
