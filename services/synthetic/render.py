@@ -32,6 +32,7 @@ from services.synthetic.families import pick_family, random_room
 from services.synthetic.furniture import Box, Furnishing, furnish_room
 from services.synthetic.room import Room, nearest_boundary
 from services.synthetic.scan import Stretch, stretch_keypoints
+from services.synthetic.scene import fragment_truth
 from services.types import FloatArray
 
 __all__ = [
@@ -550,15 +551,7 @@ def frame_ground_truth_json(scene: FrameScene) -> dict[str, Any]:
         "perimeter": scene.perimeter,
         "fragments": [
             {
-                "id": f.id,
-                "pose": f.pose.tolist(),
-                "keypoints_local": f.keypoints_local.tolist(),
-                "keypoints_world": f.keypoints_world.tolist(),
-                "diagonal": f.diagonal,
-                "loop_start": f.loop_start,
-                "loop_end": f.loop_end,
-                "loop_index": f.loop_index,
-                "centroid_local": f.centroid_local.tolist(),
+                **fragment_truth(f),
                 "station": f.station,
                 "single_wall": len(f.keypoints_world) == 2,
             }

@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import asdict, dataclass, field
-from typing import Any, Literal
+from typing import Any, Literal, Protocol
 
 import numpy as np
 
@@ -40,6 +40,7 @@ __all__ = [
     "SceneSpec",
     "SyntheticFragment",
     "SyntheticScene",
+    "fragment_truth",
     "generate_scene",
     "ground_truth_json",
 ]
@@ -356,6 +357,44 @@ def generate_scene(spec: SceneSpec, seed: int, outline: FloatArray | None = None
     )
 
 
+class _PlacedScan(Protocol):
+    """What the truth of one scan (cloud or RGB-D frame) is read from (frozen records)."""
+
+    @property
+    def id(self) -> str: ...
+    @property
+    def pose(self) -> FloatArray: ...
+    @property
+    def keypoints_local(self) -> FloatArray: ...
+    @property
+    def keypoints_world(self) -> FloatArray: ...
+    @property
+    def diagonal(self) -> float: ...
+    @property
+    def loop_start(self) -> float: ...
+    @property
+    def loop_end(self) -> float: ...
+    @property
+    def loop_index(self) -> int: ...
+    @property
+    def centroid_local(self) -> FloatArray: ...
+
+
+def fragment_truth(fragment: _PlacedScan) -> dict[str, Any]:
+    """One scan's truth record: pose, keypoints, diagonal, loop position, centroid."""
+    return {
+        "id": fragment.id,
+        "pose": fragment.pose.tolist(),
+        "keypoints_local": fragment.keypoints_local.tolist(),
+        "keypoints_world": fragment.keypoints_world.tolist(),
+        "diagonal": fragment.diagonal,
+        "loop_start": fragment.loop_start,
+        "loop_end": fragment.loop_end,
+        "loop_index": fragment.loop_index,
+        "centroid_local": fragment.centroid_local.tolist(),
+    }
+
+
 def ground_truth_json(scene: SyntheticScene) -> dict[str, Any]:
     """The scene's ground truth as JSON-able data (schema_version 1).
 
@@ -375,19 +414,7 @@ def ground_truth_json(scene: SyntheticScene) -> dict[str, Any]:
         "diagonal": scene.diagonal,
         "perimeter": scene.perimeter,
         "fragments": [
-            {
-                "id": f.id,
-                "pose": f.pose.tolist(),
-                "keypoints_local": f.keypoints_local.tolist(),
-                "keypoints_world": f.keypoints_world.tolist(),
-                "diagonal": f.diagonal,
-                "loop_start": f.loop_start,
-                "loop_end": f.loop_end,
-                "loop_index": f.loop_index,
-                "centroid_local": f.centroid_local.tolist(),
-                "n_points": len(f.points),
-                "single_wall": f.single_wall,
-            }
+            {**fragment_truth(f), "n_points": len(f.points), "single_wall": f.single_wall}
             for f in scene.fragments
         ],
         "junctions": [
