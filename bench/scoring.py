@@ -12,6 +12,7 @@ import numpy as np
 from services.layout_model import build_polygon
 from services.pipeline import fragment_pose
 from services.placement import Piece, PlacementCandidate, translations_of
+from services.placement.priors import chain_placement
 from services.refinement import refine_translations
 from services.types import LocalLayout
 
@@ -26,8 +27,7 @@ def true_assembly(
     frags = {f["id"]: f for f in truth["fragments"]}
 
     def yaw(fid: str) -> float:
-        aligned_to_world = np.asarray(frags[fid]["pose"])[:3, :3] @ layouts[fid].frame.rotation.T
-        return math.atan2(aligned_to_world[1, 0], aligned_to_world[0, 0])
+        return chain_placement(layouts[fid], np.asarray(frags[fid]["pose"]))[0]
 
     first = yaw(ids[0])
     turns = {fid: round((yaw(fid) - first) / (math.pi / 2)) % 4 for fid in ids}

@@ -38,7 +38,7 @@ from services.placement import (
     place_pieces,
     rot90,
 )
-from services.placement.priors import fit_frame, wrap_angle
+from services.placement.priors import chain_placement, fit_frame, wrap_angle
 from services.refinement import Refinement, refine_translations
 from services.registration import premerge
 from services.types import FloatArray, LocalLayout, ProgressFn
@@ -136,7 +136,6 @@ def _concrete(
         cand.missing == 0
         and len(ordered) >= 2
         and _gap(ordered, cand, translations) <= _gap_limit(ordered, cand, params)
-        and refined.status != "skipped: open chain"
         and not refined.status.startswith("fallback")
         and refined.violation_after <= params.placement.closure_tolerance
     ):
@@ -166,10 +165,7 @@ def _to_hints_frame(
 ) -> _Placed:
     """The assembly moved into the hints' frame (fitted to the prior poses)."""
     rotations = dict(zip(placed.candidate.order, placed.candidate.rotations, strict=True))
-    sources = {
-        fid: (pose[:3, :3] @ layouts[fid].keypoints_local()[0] + pose[:3, 3])[:2]
-        for fid, pose in placed.poses.items()
-    }
+    sources = {fid: chain_placement(layouts[fid], pose)[1] for fid, pose in placed.poses.items()}
     yaw, shift = fit_frame(hints.priors, rotations, sources)
     transform = np.eye(4)
     transform[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
@@ -192,11 +188,9 @@ def _contradicted_hints(
     for fid, prior in hints.priors.items():
         if fid not in placed.poses:
             continue
-        pose = placed.poses[fid]
-        source = (pose[:3, :3] @ layouts[fid].keypoints_local()[0] + pose[:3, 3])[:2]
+        yaw, source = chain_placement(layouts[fid], placed.poses[fid])
         distance = float(np.linalg.norm(source - prior.source))
-        to_hints = pose[:3, :3] @ layouts[fid].frame.rotation.T
-        yaw_error = abs(wrap_angle(float(np.arctan2(to_hints[1, 0], to_hints[0, 0])) - prior.yaw))
+        yaw_error = abs(wrap_angle(yaw - prior.yaw))
         if distance > 3 * prior.source_sigma or yaw_error > 3 * prior.sigma_yaw:
             out.append(
                 {
@@ -379,9 +373,7 @@ def place_site(
         # An open result has no room (contract section 3): a loop we could close but do not
         # trust stays in the diagnostics.
         floorplan=_rooms(main.polygon if status != "open" else None, height),
-        alternatives=[_alternative(alt, height) for alt in alternatives]
-        if status != "open"
-        else [],
+        alternatives=[_alternative(alt, height) for alt in alternatives],
         diagnostics=diagnostics,
     )
 

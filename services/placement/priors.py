@@ -24,6 +24,7 @@ __all__ = [
     "HintPair",
     "PiecePrior",
     "SiteHints",
+    "chain_placement",
     "fit_frame",
     "frame_estimate",
     "hint_pairs",
@@ -78,17 +79,21 @@ class SiteHints:
     pairs: tuple[HintPair, ...] = ()
 
 
+def chain_placement(layout: LocalLayout, pose: FloatArray) -> tuple[float, FloatArray]:
+    """Where a pose (fragment-local -> some frame, (4, 4)) puts a fragment's chain: the
+    yaw of its aligned x axis (radians) and its source keypoint's (2,) position."""
+    to_frame = pose[:3, :3] @ layout.frame.rotation.T  # aligned -> frame
+    source = pose[:3, :3] @ layout.keypoints_local()[0] + pose[:3, 3]
+    return math.atan2(to_frame[1, 0], to_frame[0, 0]), source[:2]
+
+
 def piece_prior(layout: LocalLayout, prior: FragmentPrior) -> PiecePrior:
     """The prior of a piece from its fragment's prior pose (local -> hints frame)."""
-    pose = np.asarray(prior.pose, dtype=np.float64)
-    to_hints = pose[:3, :3] @ layout.frame.rotation.T  # aligned -> hints
-    yaw = math.atan2(to_hints[1, 0], to_hints[0, 0])
-    source_local = layout.keypoints_local()[0]
-    source = pose[:3, :3] @ source_local + pose[:3, 3]
+    yaw, source = chain_placement(layout, np.asarray(prior.pose, dtype=np.float64))
     seen = layout.footprint if len(layout.footprint) else layout.keypoints
     lever = float(np.linalg.norm(seen.mean(axis=0) - layout.keypoints[0]))
     yaw_sigma = math.radians(prior.sigma_yaw_deg)
-    return PiecePrior(yaw, source[:2], prior.sigma_xy, yaw_sigma, lever)
+    return PiecePrior(yaw, source, prior.sigma_xy, yaw_sigma, lever)
 
 
 def wrap_angle(angle: float) -> float:
