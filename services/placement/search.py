@@ -289,14 +289,22 @@ def _trim_start(walls: FloatArray, start: FloatArray, length: float) -> FloatArr
     return out
 
 
-def _conflict(search: _Search, state: _State, j: int, rotation: int, samples: FloatArray) -> float:
+def _conflict(
+    search: _Search,
+    state: _State,
+    j: int,
+    rotation: int,
+    samples: FloatArray,
+    box: tuple[float, float, float, float],
+) -> float:
     """Meters of wall through space another scan saw empty, for piece j joining the state.
 
-    j's walls are tested against every placed piece's free space and the placed walls
-    against j's, each in the piece's own frame (rotate back, shift back).
+    j's walls (``samples``, site frame, bounded by ``box``) are tested against every placed
+    piece's free space and the placed walls against j's, each in the piece's own frame
+    (rotate back, shift back).
     """
     hits = 0
-    x0, y0, x1, y1 = _box(samples)
+    x0, y0, x1, y1 = box
     for index, turn, source in zip(state.order, state.rotations, state.sources, strict=True):
         free = search.pieces[index].rotated_free[turn]
         (fx0, fy0, fx1, fy1), (sx, sy) = free.box, source.tolist()
@@ -367,7 +375,8 @@ def _extend(search: _Search, state: _State, j: int, turn: int) -> _State | None:
     features[_F["turns"]] += turn != 0
     features[_F["structure"]] += search.structure[prev, j]
     features[_F["boundary"]] += search.boundary[prev, j]
-    features[_F["conflict"]] += _conflict(search, state, j, rotation, samples)
+    box = _box(samples)
+    features[_F["conflict"]] += _conflict(search, state, j, rotation, samples, box)
     rotations_cost = state.rotation_prior + search.rotation_cost[j, rotation]
     anchor = _anchor(search, j, state.end)
     anchors = state.anchors if anchor is None else (*state.anchors, anchor)
@@ -385,7 +394,7 @@ def _extend(search: _Search, state: _State, j: int, turn: int) -> _State | None:
         walls=np.vstack([state.walls, walls]),
         vertices=np.vstack([state.vertices, pts]),
         samples=np.vstack([state.samples, samples]),
-        box=_union(state.box, _box(samples)),
+        box=_union(state.box, box),
         violated=state.violated,
         resolved=state.resolved,
         rotation_prior=rotations_cost,
