@@ -23,12 +23,17 @@ from api.store import live_workers, queue_counts
 from worker.connection import record
 from worker.stats import Histogram, JobStats, parse_stats
 
-__all__ = ["UPLOADS", "UPLOAD_BYTES", "render_metrics"]
+__all__ = ["ROS_DEPTH_IMAGES", "UPLOADS", "UPLOAD_BYTES", "render_metrics"]
 
 UPLOADS = Counter(
     "fpj_uploads", "Fragment uploads by outcome (accepted, duplicate or error code)", ["outcome"]
 )
 UPLOAD_BYTES = Counter("fpj_upload_bytes", "Bytes of accepted fragment uploads")
+ROS_DEPTH_IMAGES = Counter(
+    "fpj_ros_depth_images",
+    "ROS 2 depth images by outcome (accepted, duplicate, unpaired or error code)",
+    ["outcome"],
+)
 
 
 @dataclass(frozen=True)

@@ -12,14 +12,14 @@ import os
 import re
 from functools import lru_cache
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Literal, NamedTuple
 
 from pydantic import Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from schemas.params import ParserLimits, PipelineParams
 
-__all__ = ["Settings", "get_settings"]
+__all__ = ["DepthTopic", "Settings", "get_settings"]
 
 _KEY_PREFIX = r"^[A-Za-z0-9._-]+(/[A-Za-z0-9._-]+)*$"
 _ROS_TOKEN = r"^[A-Za-z][A-Za-z0-9_]*$"
@@ -30,6 +30,30 @@ _ENDPOINT = re.compile(r"[a-z][a-z0-9+-]*/\S+")
 
 def _endpoints(text: str) -> list[str]:
     return [part.strip() for part in text.split(",") if part.strip()]
+
+
+def _topic(name: str) -> str:
+    """A ROS topic fully qualified (leading ``/``)."""
+    return "/" + name.strip().lstrip("/")
+
+
+class DepthTopic(NamedTuple):
+    """A depth ``sensor_msgs/msg/Image`` topic, its ``CameraInfo`` topic and their site."""
+
+    image: str
+    camera_info: str
+    site_id: str
+
+
+def _depth_topic(entry: str) -> DepthTopic:
+    """``IMAGE[:CAMERA_INFO]=SITE``; CAMERA_INFO defaults to ``camera_info`` next to IMAGE
+    (the ROS camera convention: ``/robot1/depth/image_raw`` -> ``/robot1/depth/camera_info``).
+    """
+    topics, _, site = entry.partition("=")
+    image, _, info = topics.partition(":")
+    image = _topic(image)
+    info = _topic(info) if info.strip() else image.rsplit("/", 1)[0] + "/camera_info"
+    return DepthTopic(image, info, site.strip())
 
 
 class Settings(BaseSettings):
@@ -123,6 +147,30 @@ class Settings(BaseSettings):
     zenoh_ros_pose_topic: str = Field(
         "", description="geometry_msgs/msg/PoseStamped topic of fragment poses (empty: none)"
     )
+    zenoh_ros_depth_topics: str = Field(
+        "",
+        description="comma-separated IMAGE[:CAMERA_INFO]=SITE: sensor_msgs/msg/Image depth "
+        "topics (16UC1 mm, 32FC1 m) whose images, paired with the CameraInfo of the same "
+        "stamp and frame, become RGB-D fragments of SITE; CAMERA_INFO defaults to camera_info "
+        "next to IMAGE (e.g. /robot1/depth/image_raw=lab reads /robot1/depth/camera_info)",
+    )
+    zenoh_ros_depth_wait_s: float = Field(
+        2.0, gt=0, description="an image (or CameraInfo) waits this long for its pair"
+    )
+    zenoh_ros_depth_pending: int = Field(
+        4, ge=1, le=64, description="unpaired images kept per depth topic (oldest dropped)"
+    )
+    zenoh_ros_map_topic: str = Field(
+        "", description="nav_msgs/msg/OccupancyGrid topic of site floorplans (empty: none)"
+    )
+    zenoh_ros_map_resolution: float = Field(
+        0.05, gt=0, le=10, description="cell side of the OccupancyGrid, m"
+    )
+    zenoh_ros_tf_topic: str = Field(
+        "",
+        description="tf2_msgs/msg/TFMessage topic of site -> fragment transforms (e.g. /tf; "
+        "empty: none)",
+    )
     zenoh_ros_distro: str = Field(
         "jazzy",
         pattern=r"^[a-z]+$",
@@ -162,9 +210,18 @@ class Settings(BaseSettings):
                 raise ValueError(f"expected /ros/topic=site_id, got {entry!r}")
         return value
 
-    @field_validator("zenoh_ros_pose_topic")
+    @field_validator("zenoh_ros_depth_topics")
     @classmethod
-    def _check_pose_topic(cls, value: str) -> str:
+    def _check_depth_topics(cls, value: str) -> str:
+        for entry in _endpoints(value):
+            image, info, site = _depth_topic(entry)
+            if not all(_ROS_TOPIC.fullmatch(t) for t in (image, info)) or not _ID.fullmatch(site):
+                raise ValueError(f"expected /ros/image[:/ros/camera_info]=site_id, got {entry!r}")
+        return value
+
+    @field_validator("zenoh_ros_pose_topic", "zenoh_ros_map_topic", "zenoh_ros_tf_topic")
+    @classmethod
+    def _check_output_topic(cls, value: str) -> str:
         if value and not _ROS_TOPIC.fullmatch(value):
             raise ValueError(f"invalid ROS topic name {value!r}")
         return value
@@ -205,7 +262,17 @@ class Settings(BaseSettings):
     def ros_cloud_topics(self) -> dict[str, str]:
         """PointCloud2 topic (fully qualified, leading ``/``) -> site id."""
         pairs = (entry.partition("=") for entry in _endpoints(self.zenoh_ros_cloud_topics))
-        return {"/" + topic.strip().lstrip("/"): site.strip() for topic, _, site in pairs}
+        return {_topic(topic): site.strip() for topic, _, site in pairs}
+
+    def ros_depth_topics(self) -> list[DepthTopic]:
+        """Depth image topics with their CameraInfo topics and sites."""
+        return [_depth_topic(entry) for entry in _endpoints(self.zenoh_ros_depth_topics)]
+
+    @property
+    def ros_enabled(self) -> bool:
+        """True when any ROS 2 topic is configured (the service joins the ROS graph)."""
+        outputs = (self.zenoh_ros_pose_topic, self.zenoh_ros_map_topic, self.zenoh_ros_tf_topic)
+        return bool(self.zenoh_ros_cloud_topics.strip() or self.ros_depth_topics() or any(outputs))
 
     @property
     def embedded(self) -> bool:

@@ -89,8 +89,7 @@ class ZenohFront:
         self.settings = backend.settings
         self.keys = ZenohKeys(self.settings.zenoh_prefix)
         self.front_id = str(session.zid())
-        ros_configured = self.settings.ros_cloud_topics() or self.settings.zenoh_ros_pose_topic
-        self.ros = RosBridge(backend, session, bridge) if ros_configured else None
+        self.ros = RosBridge(backend, session, bridge) if self.settings.ros_enabled else None
         self.robots = RobotTracker(backend, self.keys, self.front_id, bridge)
         self.publisher = ResultPublisher(backend, session, self.keys, self.ros)
         self._declared: list[Any] = []

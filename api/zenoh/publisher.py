@@ -4,7 +4,7 @@ After each placement a worker publishes ``{"version", "site_id", "generation", "
 ``P:results`` (:func:`worker.updates.store_result`). For each such message this publishes the
 result JSON on ``fpj/sites/{site}/result``, each placed fragment's :class:`PoseUpdate` on
 ``fpj/sites/{site}/poses/{fragment}`` (status closed, ambiguous or open) and, if configured,
-the PoseStamped messages of :class:`api.zenoh.ros_bridge.RosBridge`. Puts block under
+the ROS 2 messages of :class:`api.zenoh.ros_bridge.RosBridge`. Puts block under
 congestion instead of dropping, off the event loop.
 
 A result published while Redis is unreachable is missed here; the result queryable still
@@ -99,7 +99,7 @@ class ResultPublisher:
             return
         await asyncio.to_thread(self._put_result, site_id, result)
         if self.ros is not None:
-            await self.ros.publish_poses(site_id, result)
+            await self.ros.publish_result(site_id, result)
 
     def _put_result(self, site_id: str, result: ResultModel) -> None:
         block = zenoh.CongestionControl.BLOCK

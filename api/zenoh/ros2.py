@@ -13,6 +13,10 @@ As rmw_zenoh documents it (docs/design.md of ros2/rmw_zenoh):
   mangled to ``%`` and ``%`` for an empty namespace or enclave.
 
 Payloads are CDR (little-endian encapsulation), (de)serialized with the ``rosbags`` type store.
+Messages: ``sensor_msgs/msg/PointCloud2``, depth ``sensor_msgs/msg/Image`` with its
+``sensor_msgs/msg/CameraInfo`` (in), ``geometry_msgs/msg/PoseStamped``,
+``nav_msgs/msg/OccupancyGrid`` and ``tf2_msgs/msg/TFMessage`` (out); each has an encoder and
+a decoder, so robots and tests speak the same CDR as the service.
 """
 
 from __future__ import annotations
@@ -24,29 +28,45 @@ from functools import cache
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 from scipy.spatial.transform import Rotation
 
-from services.errors import InvalidFragmentError
+from services.errors import InvalidDepthError, InvalidFragmentError, InvalidIntrinsicsError
+from services.occupancy import OccupancyGrid
 from services.point_io import encode_ply
 from services.types import FloatArray
 
 __all__ = [
+    "CAMERA_INFO_TYPE",
     "CLOUD_TYPE",
+    "IMAGE_TYPE",
+    "MAP_TYPE",
     "POSE_TYPE",
+    "TF_TYPE",
+    "DecodedCameraInfo",
     "DecodedCloud",
+    "DecodedDepth",
+    "DecodedTransform",
     "RmwAttachment",
     "cloud_to_ply",
     "dds_type_name",
     "decode_attachment",
+    "decode_camera_info",
+    "decode_depth_image",
+    "decode_occupancy_grid",
     "decode_pointcloud2",
     "decode_pose_stamped",
+    "decode_tf_message",
     "encode_attachment",
+    "encode_camera_info",
+    "encode_image",
+    "encode_occupancy_grid",
     "encode_pointcloud2",
     "encode_pose_stamped",
+    "encode_tf_message",
     "endpoint_token",
     "entity_gid",
     "mangle",
@@ -57,11 +77,17 @@ __all__ = [
 
 CLOUD_TYPE = "sensor_msgs/msg/PointCloud2"
 POSE_TYPE = "geometry_msgs/msg/PoseStamped"
+IMAGE_TYPE = "sensor_msgs/msg/Image"
+CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
+MAP_TYPE = "nav_msgs/msg/OccupancyGrid"
+TF_TYPE = "tf2_msgs/msg/TFMessage"
 DEFAULT_QOS = "::,10:,:,:,,"  # reliable, volatile, keep last 10 (rmw_zenoh's compact form)
 
 _ATTACHMENT = struct.Struct("<qqB16s")
 # sensor_msgs/msg/PointField datatype -> numpy type code.
 _FIELD_TYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
+# Depth image encodings of REP 118 -> (numpy type code, meters per value).
+_DEPTH_ENCODINGS = {"16UC1": ("u2", 1e-3), "32FC1": ("f4", 1.0)}
 
 
 @cache
@@ -272,22 +298,43 @@ def encode_pointcloud2(
     return bytes(_store().serialize_cdr(msg, CLOUD_TYPE))
 
 
+def _rotation_quaternion(matrix: FloatArray) -> tuple[float, float, float, float]:
+    """(x, y, z, w) unit quaternion of a 4x4 pose's rotation."""
+    qx, qy, qz, qw = Rotation.from_matrix(matrix[:3, :3]).as_quat()
+    return float(qx), float(qy), float(qz), float(qw)
+
+
+def _pose_matrix(translation: Any, quaternion: Any) -> FloatArray:
+    """4x4 pose of a message's translation (x, y, z) and quaternion (x, y, z, w)."""
+    q, t = quaternion, translation
+    matrix = np.eye(4)
+    matrix[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+    matrix[:3, 3] = [t.x, t.y, t.z]
+    return matrix
+
+
+def _header_of(msg: Any) -> tuple[int, int, str]:
+    stamp = msg.header.stamp
+    return int(stamp.sec), int(stamp.nanosec), str(msg.header.frame_id)
+
+
+def _pose_msg(matrix: FloatArray) -> Any:
+    types = _store().types
+    position = types["geometry_msgs/msg/Point"](
+        x=float(matrix[0, 3]), y=float(matrix[1, 3]), z=float(matrix[2, 3])
+    )
+    qx, qy, qz, qw = _rotation_quaternion(matrix)
+    orientation = types["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw)
+    return types["geometry_msgs/msg/Pose"](position=position, orientation=orientation)
+
+
 def encode_pose_stamped(
     pose: ArrayLike, stamp_sec: int, stamp_nanosec: int, frame_id: str
 ) -> bytes:
     """A CDR ``geometry_msgs/msg/PoseStamped`` of a 4x4 pose (rotation as a unit quaternion)."""
     matrix = np.asarray(pose, dtype=np.float64).reshape(4, 4)
-    qx, qy, qz, qw = Rotation.from_matrix(matrix[:3, :3]).as_quat()
-    types = _store().types
-    position = types["geometry_msgs/msg/Point"](
-        x=float(matrix[0, 3]), y=float(matrix[1, 3]), z=float(matrix[2, 3])
-    )
-    orientation = types["geometry_msgs/msg/Quaternion"](
-        x=float(qx), y=float(qy), z=float(qz), w=float(qw)
-    )
-    msg = types[POSE_TYPE](
-        header=_header(stamp_sec, stamp_nanosec, frame_id),
-        pose=types["geometry_msgs/msg/Pose"](position=position, orientation=orientation),
+    msg = _store().types[POSE_TYPE](
+        header=_header(stamp_sec, stamp_nanosec, frame_id), pose=_pose_msg(matrix)
     )
     return bytes(_store().serialize_cdr(msg, POSE_TYPE))
 
@@ -295,9 +342,228 @@ def encode_pose_stamped(
 def decode_pose_stamped(cdr: bytes) -> tuple[FloatArray, int, int, str]:
     """``(pose 4x4, stamp sec, stamp nanosec, frame_id)`` of a CDR PoseStamped."""
     msg: Any = _store().deserialize_cdr(cdr, POSE_TYPE)
-    p, q = msg.pose.position, msg.pose.orientation
-    matrix = np.eye(4)
-    matrix[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
-    matrix[:3, 3] = [p.x, p.y, p.z]
-    stamp = msg.header.stamp
-    return matrix, int(stamp.sec), int(stamp.nanosec), str(msg.header.frame_id)
+    return (_pose_matrix(msg.pose.position, msg.pose.orientation), *_header_of(msg))
+
+
+# ------------------------------------------------------------------ depth images in
+
+
+@dataclass(frozen=True)
+class DecodedDepth:
+    """A depth ``sensor_msgs/msg/Image`` and its header.
+
+    ``depth``: (H, W) float32, meters along the optical axis, 0 where there is no reading
+    (REP 118's NaN and infinities, and negative values, become 0).
+    """
+
+    depth: NDArray[np.float32]
+    stamp_sec: int
+    stamp_nanosec: int
+    frame_id: str
+    encoding: str
+
+
+def decode_depth_image(cdr: bytes) -> DecodedDepth:
+    """Decode a CDR depth image: ``16UC1`` (millimetres) or ``32FC1`` (meters), REP 118.
+
+    Raises
+    ------
+    InvalidDepthError
+        Not a CDR Image, another encoding (colour, 8-bit, ...), or a size that does not fit
+        its data (``step * height`` bytes, ``step`` at least a row of pixels).
+    """
+    try:
+        msg: Any = _store().deserialize_cdr(cdr, IMAGE_TYPE)
+    except SerdeError as exc:
+        raise InvalidDepthError(f"not a CDR Image: {exc}") from exc
+    spec = _DEPTH_ENCODINGS.get(msg.encoding)
+    if spec is None:
+        raise InvalidDepthError(
+            f"Image encoding {msg.encoding[:40]!r}: a depth image is 16UC1 (millimetres) "
+            "or 32FC1 (meters)"
+        )
+    code, meters_per_value = spec
+    dtype = np.dtype(code).newbyteorder(">" if msg.is_bigendian else "<")
+    height, width, step = msg.height, msg.width, msg.step
+    row_bytes = width * dtype.itemsize
+    if height < 1 or width < 1 or step < row_bytes or len(msg.data) < step * height:
+        raise InvalidDepthError(
+            f"Image of {width}x{height} {msg.encoding}, step {step}, does not fit its "
+            f"{len(msg.data)} data bytes"
+        )
+    rows = np.asarray(msg.data, dtype=np.uint8)[: step * height].reshape(height, step)
+    values = np.ascontiguousarray(rows[:, :row_bytes]).view(dtype).reshape(height, width)
+    depth = values.astype(np.float32) * np.float32(meters_per_value)
+    depth[~np.isfinite(depth) | (depth < 0)] = 0.0  # REP 118: NaN and +-inf are no reading
+    return DecodedDepth(depth, *_header_of(msg), str(msg.encoding))
+
+
+def encode_image(
+    pixels: ArrayLike, encoding: str, stamp_sec: int = 0, stamp_nanosec: int = 0, frame_id: str = ""
+) -> bytes:
+    """A CDR ``sensor_msgs/msg/Image`` of (H, W) or (H, W, C) pixel values, little-endian,
+    rows unpadded; ``encoding`` as in ``sensor_msgs/image_encodings`` (``16UC1``, ``32FC1``,
+    ``mono8``, ``rgb8``, ...). For a depth image: millimetres as uint16 in ``16UC1``, meters
+    as float32 in ``32FC1``."""
+    array = np.asarray(pixels)
+    height, width = array.shape[:2]
+    little = np.ascontiguousarray(array, dtype=array.dtype.newbyteorder("<"))
+    types = _store().types
+    msg = types[IMAGE_TYPE](
+        header=_header(stamp_sec, stamp_nanosec, frame_id),
+        height=height,
+        width=width,
+        encoding=encoding,
+        is_bigendian=0,
+        step=little[0].nbytes if height else 0,
+        data=little.view(np.uint8).reshape(-1),
+    )
+    return bytes(_store().serialize_cdr(msg, IMAGE_TYPE))
+
+
+@dataclass(frozen=True)
+class DecodedCameraInfo:
+    """What a ``sensor_msgs/msg/CameraInfo`` says of the pinhole camera (pixels)."""
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    stamp_sec: int
+    stamp_nanosec: int
+    frame_id: str
+
+
+def decode_camera_info(cdr: bytes) -> DecodedCameraInfo:
+    """Size and ``K`` (row-major ``[fx, 0, cx, 0, fy, cy, 0, 0, 1]``) of a CDR CameraInfo.
+
+    Raises
+    ------
+    InvalidIntrinsicsError
+        Not a CDR CameraInfo.
+    """
+    try:
+        msg: Any = _store().deserialize_cdr(cdr, CAMERA_INFO_TYPE)
+    except SerdeError as exc:
+        raise InvalidIntrinsicsError(f"not a CDR CameraInfo: {exc}") from exc
+    k = [float(v) for v in msg.k]
+    return DecodedCameraInfo(
+        int(msg.width), int(msg.height), k[0], k[4], k[2], k[5], *_header_of(msg)
+    )
+
+
+def encode_camera_info(
+    width: int,
+    height: int,
+    k: tuple[float, float, float, float],
+    stamp_sec: int = 0,
+    stamp_nanosec: int = 0,
+    frame_id: str = "",
+) -> bytes:
+    """A CDR ``sensor_msgs/msg/CameraInfo`` of an undistorted pinhole camera;
+    ``k`` is (fx, fy, cx, cy) in pixels."""
+    fx, fy, cx, cy = k
+    types = _store().types
+    msg = types[CAMERA_INFO_TYPE](
+        header=_header(stamp_sec, stamp_nanosec, frame_id),
+        height=height,
+        width=width,
+        distortion_model="plumb_bob",
+        d=np.zeros(5),
+        k=np.array([fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]),
+        r=np.eye(3).reshape(-1),
+        p=np.array([fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]),
+        binning_x=0,
+        binning_y=0,
+        roi=types["sensor_msgs/msg/RegionOfInterest"](
+            x_offset=0, y_offset=0, height=0, width=0, do_rectify=False
+        ),
+    )
+    return bytes(_store().serialize_cdr(msg, CAMERA_INFO_TYPE))
+
+
+# ------------------------------------------------------------------ maps and transforms out
+
+
+def encode_occupancy_grid(
+    grid: OccupancyGrid, stamp_sec: int, stamp_nanosec: int, frame_id: str
+) -> bytes:
+    """A CDR ``nav_msgs/msg/OccupancyGrid``: the grid's cells row-major from its origin
+    (``info.origin`` at floor height, not rotated), ``map_load_time`` the header's stamp."""
+    types = _store().types
+    stamp = types["builtin_interfaces/msg/Time"](sec=stamp_sec, nanosec=stamp_nanosec)
+    origin = np.eye(4)
+    origin[:2, 3] = grid.origin
+    info = types["nav_msgs/msg/MapMetaData"](
+        map_load_time=stamp,
+        resolution=grid.resolution,
+        width=grid.width,
+        height=grid.height,
+        origin=_pose_msg(origin),
+    )
+    msg = types[MAP_TYPE](
+        header=_header(stamp_sec, stamp_nanosec, frame_id),
+        info=info,
+        data=np.ascontiguousarray(grid.cells, dtype=np.int8).reshape(-1),
+    )
+    return bytes(_store().serialize_cdr(msg, MAP_TYPE))
+
+
+def decode_occupancy_grid(cdr: bytes) -> tuple[OccupancyGrid, int, int, str]:
+    """``(grid, stamp sec, stamp nanosec, frame_id)`` of a CDR OccupancyGrid (the origin's
+    rotation is not applied: the service never rotates it)."""
+    msg: Any = _store().deserialize_cdr(cdr, MAP_TYPE)
+    info = msg.info
+    cells = np.asarray(msg.data, dtype=np.int8).reshape(info.height, info.width)
+    origin = (float(info.origin.position.x), float(info.origin.position.y))
+    return OccupancyGrid(cells, float(info.resolution), origin), *_header_of(msg)
+
+
+@dataclass(frozen=True)
+class DecodedTransform:
+    """One ``geometry_msgs/msg/TransformStamped``: ``pose`` (4x4) maps ``child_frame``
+    coordinates to ``parent_frame`` ones."""
+
+    parent_frame: str
+    child_frame: str
+    pose: FloatArray
+    stamp_sec: int
+    stamp_nanosec: int
+
+
+def encode_tf_message(
+    poses: dict[str, FloatArray], parent_frame: str, stamp_sec: int, stamp_nanosec: int
+) -> bytes:
+    """A CDR ``tf2_msgs/msg/TFMessage``: one transform per child frame (``poses``: child
+    frame -> 4x4 pose mapping the child's points into ``parent_frame``), one stamp."""
+    types = _store().types
+    transforms = []
+    for child, pose in poses.items():
+        matrix = np.asarray(pose, dtype=np.float64).reshape(4, 4)
+        qx, qy, qz, qw = _rotation_quaternion(matrix)
+        x, y, z = (float(v) for v in matrix[:3, 3])
+        transform = types["geometry_msgs/msg/Transform"](
+            translation=types["geometry_msgs/msg/Vector3"](x=x, y=y, z=z),
+            rotation=types["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw),
+        )
+        transforms.append(
+            types["geometry_msgs/msg/TransformStamped"](
+                header=_header(stamp_sec, stamp_nanosec, parent_frame),
+                child_frame_id=child,
+                transform=transform,
+            )
+        )
+    return bytes(_store().serialize_cdr(types[TF_TYPE](transforms=transforms), TF_TYPE))
+
+
+def decode_tf_message(cdr: bytes) -> list[DecodedTransform]:
+    """The transforms of a CDR TFMessage, in message order."""
+    msg: Any = _store().deserialize_cdr(cdr, TF_TYPE)
+    decoded = []
+    for item in msg.transforms:
+        sec, nanosec, parent = _header_of(item)
+        pose = _pose_matrix(item.transform.translation, item.transform.rotation)
+        decoded.append(DecodedTransform(parent, str(item.child_frame_id), pose, sec, nanosec))
+    return decoded

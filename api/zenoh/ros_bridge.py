@@ -1,17 +1,40 @@
 """The service as a ROS 2 node on rmw_zenoh, without ROS installed.
 
-- Subscribes to each configured ``sensor_msgs/msg/PointCloud2`` topic
-  (``FPJ_ZENOH_ROS_CLOUD_TOPICS="/robot1/fragments=lab,..."``), any type hash (so Humble's
-  ``TypeHashNotSupported`` and later distributions' RIHS01 hashes both match). Every message
-  becomes a fragment of the topic's site: its x, y, z go into a binary PLY that takes the one
-  ingest path. Fragment id ``{robot}_{stamp.sec}_{stamp.nanosec:09d}``, where ``robot`` is the
-  topic's namespace with ``/`` as ``.`` (``/robot1/fragments`` -> ``robot1``; none: ``ros``).
-- Publishes every placed fragment's pose as ``geometry_msgs/msg/PoseStamped`` on
-  ``FPJ_ZENOH_ROS_POSE_TOPIC`` after each placement: ``header.frame_id`` is the site id (the
-  site frame), ``header.stamp`` the stamp of the PointCloud2 the fragment came from (for other
-  fragments: their upload time), so a robot matches poses to its clouds by stamp.
-- Declares the node's, subscriptions' and publisher's graph liveliness tokens, so
-  ``ros2 node list`` / ``ros2 topic list`` show them.
+In (topics of any type hash, so Humble's ``TypeHashNotSupported`` and later distributions'
+RIHS01 hashes both match; every message becomes a fragment of the topic's site through the
+one ingest path):
+
+- ``sensor_msgs/msg/PointCloud2`` topics (``FPJ_ZENOH_ROS_CLOUD_TOPICS="/robot1/fragments=lab,
+  ..."``): x, y, z go into a binary PLY;
+- depth ``sensor_msgs/msg/Image`` topics, 16UC1 (mm) or 32FC1 (m), each with its
+  ``sensor_msgs/msg/CameraInfo`` topic (``FPJ_ZENOH_ROS_DEPTH_TOPICS="/robot1/depth/image_raw
+  =lab"``, CameraInfo on ``/robot1/depth/camera_info``): an image and the CameraInfo of the
+  same stamp and frame id become an RGB-D frame archive (:mod:`api.zenoh.ros_depth`); an
+  image left unpaired for ``FPJ_ZENOH_ROS_DEPTH_WAIT_S``, or pushed out by newer ones
+  (``FPJ_ZENOH_ROS_DEPTH_PENDING``), is dropped with a log line. Outcomes are counted in
+  ``fpj_ros_depth_images_total`` (``/metrics``).
+
+Fragment id ``{robot}_{stamp.sec}_{stamp.nanosec:09d}``, where ``robot`` is the topic's
+namespace with ``/`` as ``.`` (``/robot1/fragments`` -> ``robot1``; none: ``ros``). Bad
+messages are logged with the upload error code; the bridge never stops for one.
+
+Out, after each placement:
+
+- ``geometry_msgs/msg/PoseStamped`` per placed fragment on ``FPJ_ZENOH_ROS_POSE_TOPIC``:
+  ``header.frame_id`` is the site id (the site frame), ``header.stamp`` the stamp of the
+  message the fragment came from (for other fragments: their upload time), so a robot matches
+  poses to its scans by stamp;
+- ``tf2_msgs/msg/TFMessage`` on ``FPJ_ZENOH_ROS_TF_TOPIC``: one transform per placed fragment,
+  parent frame the site id, child frame the fragment id, so rviz shows every scan in place;
+- ``nav_msgs/msg/OccupancyGrid`` of the floorplan on ``FPJ_ZENOH_ROS_MAP_TOPIC`` (frame the
+  site id, cells of ``FPJ_ZENOH_ROS_MAP_RESOLUTION`` m; :mod:`services.occupancy`).
+
+Poses and transforms go out for results closed, ambiguous or open (an open result's poses
+are its best partial guess, as on ``fpj/sites/*/poses``), the map only for closed and
+ambiguous ones (an open result has no room). Transforms and map are stamped with the time of
+publication: tf2 ignores a transform sent again with an unchanged stamp (TF_REPEATED_DATA),
+and a placement may move a fragment. Graph liveliness tokens of the node and of every
+subscription and publisher make them show in ``ros2 node list`` / ``ros2 topic list``.
 """
 
 from __future__ import annotations
@@ -21,36 +44,65 @@ import itertools
 import logging
 import math
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from functools import partial
-from typing import Any
+from typing import Any, Protocol
 
+import numpy as np
 import zenoh
 
 from api.backend import Backend
+from api.metrics import ROS_DEPTH_IMAGES
 from api.store import load_site_status
 from api.zenoh.bridge import LoopBridge, error_of
 from api.zenoh.ingest import ingest_with_sender
 from api.zenoh.presence import load_senders
 from api.zenoh.ros2 import (
+    CAMERA_INFO_TYPE,
     CLOUD_TYPE,
+    IMAGE_TYPE,
+    MAP_TYPE,
     POSE_TYPE,
+    TF_TYPE,
     DecodedCloud,
+    DecodedDepth,
     cloud_to_ply,
+    decode_camera_info,
+    decode_depth_image,
     decode_pointcloud2,
     encode_attachment,
+    encode_occupancy_grid,
     encode_pose_stamped,
+    encode_tf_message,
     endpoint_token,
     entity_gid,
     node_token,
     topic_key,
     type_hash,
 )
+from api.zenoh.ros_depth import DepthPair, DepthPairer, frame_archive
 from schemas.result import ResultModel
+from schemas.settings import DepthTopic
 from schemas.zenoh import POSE_STATUSES, SenderRecord
+from services.occupancy import rasterize_floorplan
 
-__all__ = ["RosBridge", "cloud_fragment_id", "topic_robot"]
+__all__ = ["MAP_STATUSES", "RosBridge", "cloud_fragment_id", "topic_robot"]
 
 log = logging.getLogger(__name__)
+
+MAP_STATUSES = ("closed", "ambiguous")  # results whose floorplan is a closed room
+
+
+class _Stamped(Protocol):
+    """A decoded message's header."""
+
+    @property
+    def stamp_sec(self) -> int: ...
+    @property
+    def stamp_nanosec(self) -> int: ...
+    @property
+    def frame_id(self) -> str: ...
 
 
 def topic_robot(topic: str) -> str:
@@ -63,13 +115,24 @@ def topic_robot(topic: str) -> str:
     return ".".join(namespace)[:40] or "ros"
 
 
-def cloud_fragment_id(robot: str, cloud: DecodedCloud) -> str:
-    """``{robot}_{sec}_{nanosec:09d}`` (at most 61 characters of the id alphabet)."""
-    return f"{robot}_{cloud.stamp_sec}_{cloud.stamp_nanosec:09d}"
+def cloud_fragment_id(robot: str, message: _Stamped) -> str:
+    """``{robot}_{sec}_{nanosec:09d}`` of a message's stamp (at most 61 characters of the id
+    alphabet)."""
+    return f"{robot}_{message.stamp_sec}_{message.stamp_nanosec:09d}"
+
+
+@dataclass(frozen=True)
+class _Output:
+    """A publisher of the node with its rmw_zenoh GID and sequence numbers."""
+
+    publisher: zenoh.Publisher
+    gid: bytes
+    sequence: itertools.count[int]
 
 
 class RosBridge:
-    """PointCloud2 subscriptions in, PoseStamped publications out."""
+    """PointCloud2 and depth Image subscriptions in; PoseStamped, TFMessage and OccupancyGrid
+    publications out."""
 
     def __init__(self, backend: Backend, session: zenoh.Session, bridge: LoopBridge) -> None:
         settings = backend.settings
@@ -78,109 +141,235 @@ class RosBridge:
         self.node = settings.zenoh_ros_node
         self.distro = settings.zenoh_ros_distro
         self.topics = settings.ros_cloud_topics()
+        self.depth_topics = settings.ros_depth_topics()
         self.pose_topic = settings.zenoh_ros_pose_topic
+        self.tf_topic = settings.zenoh_ros_tf_topic
+        self.map_topic = settings.zenoh_ros_map_topic
+        self.map_resolution = settings.zenoh_ros_map_resolution
         self.session_id = str(session.zid())
-        self._publisher: zenoh.Publisher | None = None
-        self._gid = bytes(16)
-        self._sequence = itertools.count(1)
+        self._pairers = {
+            t.image: DepthPairer(settings.zenoh_ros_depth_wait_s, settings.zenoh_ros_depth_pending)
+            for t in self.depth_topics
+        }
+        self._outputs: dict[str, _Output] = {}  # message type -> its publisher
+        self._entity_ids = itertools.count(1)
         self._order: dict[str, asyncio.Lock] = {}
 
-    @property
-    def pose_key(self) -> str:
-        """Key expression of the PoseStamped topic (with this distribution's type hash)."""
-        return topic_key(self.domain, self.pose_topic, POSE_TYPE, type_hash(POSE_TYPE, self.distro))
-
     def declare(self) -> list[Any]:
-        """Declare subscriptions, the publisher and their graph tokens; returns them all."""
+        """Declare subscriptions, publishers and their graph tokens; returns them all."""
         live = self.session.liveliness()
         declared: list[Any] = [
             live.declare_token(node_token(self.domain, self.session_id, self.node))
         ]
-        cloud_hash = type_hash(CLOUD_TYPE, self.distro)
-        for entity_id, (topic, site_id) in enumerate(self.topics.items(), start=10):
-            key = topic_key(self.domain, topic, CLOUD_TYPE)
-            declared.append(
-                self.session.declare_subscriber(key, partial(self._on_cloud, topic, site_id))
-            )
-            token = self._token(entity_id, "MS", topic, CLOUD_TYPE, cloud_hash)
-            declared.append(live.declare_token(token))
-            log.info("PointCloud2 topic %s -> site %s (%s)", topic, site_id, key)
-        if self.pose_topic:
-            self._publisher = self.session.declare_publisher(
-                self.pose_key, congestion_control=zenoh.CongestionControl.BLOCK
-            )
-            token = self._token(
-                9, "MP", self.pose_topic, POSE_TYPE, type_hash(POSE_TYPE, self.distro)
-            )
-            self._gid = entity_gid(token)
-            declared += [self._publisher, live.declare_token(token)]
-            log.info("PoseStamped topic %s (%s)", self.pose_topic, self.pose_key)
+        for topic, site_id in self.topics.items():
+            declared += self._subscribe(topic, CLOUD_TYPE, partial(self._on_cloud, topic, site_id))
+            log.info("PointCloud2 topic %s -> site %s", topic, site_id)
+        for depth in self.depth_topics:
+            declared += self._subscribe(depth.image, IMAGE_TYPE, partial(self._on_image, depth))
+            on_info = partial(self._on_camera_info, depth)
+            declared += self._subscribe(depth.camera_info, CAMERA_INFO_TYPE, on_info)
+            log.info("depth Image topic %s + %s -> site %s", *depth)
+        for topic, msgtype in (
+            (self.pose_topic, POSE_TYPE),
+            (self.tf_topic, TF_TYPE),
+            (self.map_topic, MAP_TYPE),
+        ):
+            if topic:
+                declared += self._advertise(topic, msgtype)
         return declared
 
-    def _token(self, entity_id: int, kind: str, topic: str, msgtype: str, hash_: str) -> str:
+    def _subscribe(
+        self, topic: str, msgtype: str, callback: Callable[[zenoh.Sample], None]
+    ) -> list[Any]:
+        """A subscription of ``topic`` (any type hash) and its liveliness token."""
+        subscriber = self.session.declare_subscriber(
+            topic_key(self.domain, topic, msgtype), callback
+        )
+        token = self._token("MS", topic, msgtype)
+        return [subscriber, self.session.liveliness().declare_token(token)]
+
+    def _advertise(self, topic: str, msgtype: str) -> list[Any]:
+        """A publisher of ``topic`` and its liveliness token."""
+        key = topic_key(self.domain, topic, msgtype, type_hash(msgtype, self.distro))
+        publisher = self.session.declare_publisher(
+            key, congestion_control=zenoh.CongestionControl.BLOCK
+        )
+        token = self._token("MP", topic, msgtype)
+        self._outputs[msgtype] = _Output(publisher, entity_gid(token), itertools.count(1))
+        log.info("%s topic %s (%s)", msgtype.rsplit("/", 1)[-1], topic, key)
+        return [publisher, self.session.liveliness().declare_token(token)]
+
+    def _token(self, kind: str, topic: str, msgtype: str) -> str:
         return endpoint_token(
-            self.domain, self.session_id, self.node, entity_id, kind, topic, msgtype, hash_
+            self.domain,
+            self.session_id,
+            self.node,
+            next(self._entity_ids),
+            kind,
+            topic,
+            msgtype,
+            type_hash(msgtype, self.distro),
         )
 
+    # ------------------------------------------------------------ in
+
     def _on_cloud(self, topic: str, site_id: str, sample: zenoh.Sample) -> None:  # zenoh thread
-        if sample.kind != zenoh.SampleKind.PUT:
-            return
-        self.bridge.submit(self.ingest_cloud(topic, site_id, sample.payload.to_bytes()))
+        if sample.kind == zenoh.SampleKind.PUT:
+            self.bridge.submit(self.ingest_cloud(topic, site_id, sample.payload.to_bytes()))
+
+    def _on_image(self, depth: DepthTopic, sample: zenoh.Sample) -> None:  # zenoh thread
+        if sample.kind == zenoh.SampleKind.PUT:
+            self.bridge.submit(self.receive_image(depth, sample.payload.to_bytes()))
+
+    def _on_camera_info(self, depth: DepthTopic, sample: zenoh.Sample) -> None:  # zenoh thread
+        if sample.kind == zenoh.SampleKind.PUT:
+            self.bridge.submit(self.receive_camera_info(depth, sample.payload.to_bytes()))
 
     async def ingest_cloud(self, topic: str, site_id: str, cdr: bytes) -> None:
         """Turn one PointCloud2 into a fragment of ``site_id`` (errors are logged).
 
         Messages of one topic are stored in the order they arrived (the site's fragment order).
         """
-        async with self._order.setdefault(topic, asyncio.Lock()):
-            await self._ingest_cloud(topic, site_id, cdr)
 
-    async def _ingest_cloud(self, topic: str, site_id: str, cdr: bytes) -> None:
+        def convert() -> tuple[DecodedCloud, bytes]:
+            cloud = decode_pointcloud2(cdr)
+            return cloud, cloud_to_ply(cloud)
+
+        async with self._order.setdefault(topic, asyncio.Lock()):
+            await self._ingest("PointCloud2", topic, site_id, convert)
+
+    async def receive_image(self, depth: DepthTopic, cdr: bytes) -> None:
+        """Decode a depth image; ingest it once its CameraInfo is there (errors are logged
+        and counted). One camera's messages are handled in the order they arrived."""
+        async with self._order.setdefault(depth.image, asyncio.Lock()):
+            try:
+                image = await asyncio.to_thread(decode_depth_image, cdr)
+            except Exception as exc:  # a bad image is logged and counted, like any rejection
+                ROS_DEPTH_IMAGES.labels(self._rejected("depth Image", depth.image, exc)).inc()
+                return
+            pair, dropped = self._pairers[depth.image].add_image(image)
+            self._drop_unpaired(depth, dropped)
+            if pair is not None:
+                await self._ingest_pair(depth, pair)
+                return
+            # No later message may come to expire it: look again once its wait is over.
+            wait = self._pairers[depth.image].wait_s
+            asyncio.get_running_loop().call_later(wait * 1.01, self._expire, depth)
+
+    async def receive_camera_info(self, depth: DepthTopic, cdr: bytes) -> None:
+        """Decode a CameraInfo and ingest the image waiting for it, if any."""
+        async with self._order.setdefault(depth.image, asyncio.Lock()):
+            try:
+                info = decode_camera_info(cdr)
+            except Exception as exc:  # its image will be dropped unpaired, and counted then
+                code, message = error_of(exc)
+                log.warning("CameraInfo on %s rejected: %s: %s", depth.camera_info, code, message)
+                return
+            pair, dropped = self._pairers[depth.image].add_info(info)
+            self._drop_unpaired(depth, dropped)
+            if pair is not None:
+                await self._ingest_pair(depth, pair)
+
+    def _expire(self, depth: DepthTopic) -> None:  # event loop, between handlers
+        self._drop_unpaired(depth, self._pairers[depth.image].expire())
+
+    def _drop_unpaired(self, depth: DepthTopic, images: list[DecodedDepth]) -> None:
+        for image in images:
+            ROS_DEPTH_IMAGES.labels("unpaired").inc()
+            log.warning(
+                "depth Image on %s (stamp %d.%09d, frame %r) dropped: no CameraInfo of the "
+                "same stamp and frame on %s",
+                depth.image,
+                image.stamp_sec,
+                image.stamp_nanosec,
+                image.frame_id,
+                depth.camera_info,
+            )
+
+    async def _ingest_pair(self, depth: DepthTopic, pair: DepthPair) -> None:
+        def convert() -> tuple[DecodedDepth, bytes]:
+            return pair.image, frame_archive(pair)
+
+        outcome = await self._ingest("depth Image", depth.image, depth.site_id, convert)
+        ROS_DEPTH_IMAGES.labels(outcome).inc()
+
+    async def _ingest(
+        self,
+        kind: str,
+        topic: str,
+        site_id: str,
+        convert: Callable[[], tuple[_Stamped, bytes]],
+    ) -> str:
+        """Store what ``convert`` (run off the loop) makes of a message as a fragment.
+
+        Returns the outcome: ``accepted``, ``duplicate`` or the error code (logged).
+        """
         try:
-            cloud = await asyncio.to_thread(decode_pointcloud2, cdr)
+            message, data = await asyncio.to_thread(convert)
             robot = topic_robot(topic)
-            fragment_id = cloud_fragment_id(robot, cloud)
-            ply = await asyncio.to_thread(cloud_to_ply, cloud)
+            fragment_id = cloud_fragment_id(robot, message)
             sender = SenderRecord(
                 robot_id=robot,
                 via="ros2",
                 topic=topic,
-                stamp_sec=cloud.stamp_sec,
-                stamp_nanosec=cloud.stamp_nanosec,
-                frame_id=cloud.frame_id,
+                stamp_sec=message.stamp_sec,
+                stamp_nanosec=message.stamp_nanosec,
+                frame_id=message.frame_id,
             )
-            reply = await ingest_with_sender(self.backend, site_id, fragment_id, ply, sender)
+            reply = await ingest_with_sender(self.backend, site_id, fragment_id, data, sender)
         except Exception as exc:  # every failure is logged; a subscriber has nobody to tell
-            code, message = error_of(exc)
-            log.warning("PointCloud2 on %s rejected: %s: %s", topic, code, message)
-            if code == "internal_error":
-                log.exception("PointCloud2 on %s", topic, exc_info=exc)
-            return
+            return self._rejected(kind, topic, exc)
         log.info(
-            "PointCloud2 on %s -> fragment %s/%s (%s)",
+            "%s on %s -> fragment %s/%s (%s)",
+            kind,
             topic,
             site_id,
             fragment_id,
             "new" if reply.created else "already stored",
         )
+        return "accepted" if reply.created else "duplicate"
 
-    async def publish_poses(self, site_id: str, result: ResultModel) -> None:
-        """Publish a PoseStamped per placed fragment of a closed, ambiguous or open result."""
-        if self._publisher is None or result.status not in POSE_STATUSES:
+    @staticmethod
+    def _rejected(kind: str, topic: str, exc: Exception) -> str:
+        """Log a refused message; returns its error code."""
+        code, message = error_of(exc)
+        log.warning("%s on %s rejected: %s: %s", kind, topic, code, message)
+        if code == "internal_error":
+            log.exception("%s on %s", kind, topic, exc_info=exc)
+        return code
+
+    # ------------------------------------------------------------ out
+
+    async def publish_result(self, site_id: str, result: ResultModel) -> None:
+        """Publish what is configured of a placement's result: poses and transforms of the
+        placed fragments (closed, ambiguous or open), the floorplan's grid (closed or
+        ambiguous)."""
+        if not self._outputs or result.status not in POSE_STATUSES:
             return
-        placed = [f for f in result.fragments if f.placed and f.pose is not None]
-        if not placed:
-            return
-        stamps = await self._stamps(site_id)
-        messages = [
-            encode_pose_stamped(f.pose, *stamps.get(f.id, (0, 0)), site_id)
-            for f in placed
-            if f.pose is not None
-        ]
+        placed = {f.id: np.asarray(f.pose) for f in result.fragments if f.placed and f.pose}
+        messages: list[tuple[str, bytes]] = []
+        if POSE_TYPE in self._outputs and placed:
+            stamps = await self._stamps(site_id)
+            messages += [
+                (POSE_TYPE, encode_pose_stamped(pose, *stamps.get(fid, (0, 0)), site_id))
+                for fid, pose in placed.items()
+            ]
+        now = divmod(time.time_ns(), 1_000_000_000)
+        if TF_TYPE in self._outputs and placed:
+            messages.append((TF_TYPE, encode_tf_message(placed, site_id, *now)))
+        if MAP_TYPE in self._outputs and result.status in MAP_STATUSES:
+            rooms = [room.polygon for room in result.floorplan.rooms]
+            try:
+                grid = await asyncio.to_thread(rasterize_floorplan, rooms, self.map_resolution)
+            except ValueError as exc:  # a degenerate floorplan: no map, the rest goes out
+                log.warning("no OccupancyGrid of site %s: %s", site_id, exc)
+            else:
+                if grid.width:
+                    messages.append((MAP_TYPE, encode_occupancy_grid(grid, *now, site_id)))
         await asyncio.to_thread(self._put_all, messages)
 
     async def _stamps(self, site_id: str) -> dict[str, tuple[int, int]]:
-        """Fragment id -> (sec, nanosec): the source cloud's stamp, else the upload time."""
+        """Fragment id -> (sec, nanosec): the source message's stamp, else the upload time."""
         status = await load_site_status(self.backend, site_id)
         stamps = {}
         for fragment in status.fragments:
@@ -191,8 +380,8 @@ class RosBridge:
                 stamps[fid] = (sender.stamp_sec, sender.stamp_nanosec)
         return stamps
 
-    def _put_all(self, messages: list[bytes]) -> None:
-        assert self._publisher is not None
-        for cdr in messages:
-            attachment = encode_attachment(next(self._sequence), time.time_ns(), self._gid)
-            self._publisher.put(cdr, attachment=attachment)
+    def _put_all(self, messages: list[tuple[str, bytes]]) -> None:
+        for msgtype, cdr in messages:
+            output = self._outputs[msgtype]
+            attachment = encode_attachment(next(output.sequence), time.time_ns(), output.gid)
+            output.publisher.put(cdr, attachment=attachment)

@@ -39,6 +39,14 @@ MAX_UPLOAD = 2_000_000
 ROS_CLOUD_TOPIC = "/robot1/fragments"
 ROS_SITE = "ros_site"
 ROS_POSE_TOPIC = "/floorplan/poses"
+ROS_DEPTH_TOPIC = "/robot2/depth/image_raw"  # CameraInfo on /robot2/depth/camera_info
+ROS_DEPTH_SITE = "ros_depth_site"
+ROS_DEPTH2_TOPIC = "/robot3/depth"  # CameraInfo on ROS_DEPTH2_INFO_TOPIC
+ROS_DEPTH2_INFO_TOPIC = "/robot3/info"
+ROS_DEPTH2_SITE = "ros_depth2_site"
+ROS_MAP_TOPIC = "/floorplan/map"
+ROS_TF_TOPIC = "/tf"
+ROS_DEPTH_WAIT_S = 1.0
 
 
 @dataclass
@@ -115,6 +123,11 @@ def zenoh_service(
         zenoh_listen=f"tcp/127.0.0.1:{zenoh_port}",
         zenoh_ros_cloud_topics=f"{ROS_CLOUD_TOPIC}={ROS_SITE}",
         zenoh_ros_pose_topic=ROS_POSE_TOPIC,
+        zenoh_ros_depth_topics=f"{ROS_DEPTH_TOPIC}={ROS_DEPTH_SITE},"
+        f"{ROS_DEPTH2_TOPIC}:{ROS_DEPTH2_INFO_TOPIC}={ROS_DEPTH2_SITE}",
+        zenoh_ros_depth_wait_s=ROS_DEPTH_WAIT_S,
+        zenoh_ros_map_topic=ROS_MAP_TOPIC,
+        zenoh_ros_tf_topic=ROS_TF_TOPIC,
         zenoh_presence_ttl_s=3.0,
     )
     log = tmp_path_factory.mktemp("zenoh") / "serve.log"
