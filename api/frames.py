@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import io
 import zipfile
+import zlib
 from pathlib import PurePosixPath
 
 from schemas.frames import ArchiveLimits
@@ -116,7 +117,14 @@ def _members(
         cap = min(limits.max_entry_bytes, limits.max_total_bytes - total)
         try:
             content = _inflate(archive, info, cap)
-        except (zipfile.BadZipFile, EOFError, OSError, ValueError, NotImplementedError) as exc:
+        except (
+            zipfile.BadZipFile,
+            zlib.error,
+            EOFError,
+            OSError,
+            ValueError,
+            NotImplementedError,
+        ) as exc:
             raise InvalidArchiveError(f"archive entry {info.filename[:80]!r}: {exc}") from exc
         total += len(content)
         if content.startswith(_ZIP_MAGIC):
