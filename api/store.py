@@ -78,7 +78,8 @@ async def list_sites(backend: Backend, offset: int, limit: int) -> SiteList:
     """Sites in creation order, with their fragment counts and placement state."""
     keys, r = backend.keys, backend.redis
     total = int(await r.zcard(keys.sites))
-    ids = strings(await r.zrange(keys.sites, offset, offset + limit - 1))
+    # Past the end the page is empty (an offset beyond Redis' 64-bit range is an error there).
+    ids = strings(await r.zrange(keys.sites, offset, offset + limit - 1)) if offset < total else []
     async with r.pipeline(transaction=False) as pipe:
         for sid in ids:
             pipe.hgetall(keys.site(sid))
