@@ -184,6 +184,25 @@ def worker(
     raise typer.Exit(run_worker(concurrency))
 
 
+@command()
+def jobs(
+    retry: Annotated[
+        list[str] | None,
+        typer.Option("--retry", help="dead-letter entry id to queue again (repeatable)"),
+    ] = None,
+    retry_all: Annotated[bool, typer.Option(help="queue every dead job again")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="one JSON object a line")] = False,
+) -> None:
+    """List the jobs given up on (the dead-letter stream) or queue them again.
+
+    Needs FPJ_REDIS_URL (the service's Redis). Exit code 2 when Redis is not configured or
+    an entry to retry does not exist.
+    """
+    from cli.jobs import run_jobs
+
+    raise typer.Exit(run_jobs(retry or [], retry_all, as_json))
+
+
 ConnectOpt = Annotated[
     list[str] | None,
     typer.Option("--connect", "-e", help="zenoh endpoint of the service or a router (repeatable)"),
