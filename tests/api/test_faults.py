@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
+import zlib
 from pathlib import Path
+from typing import Any
 
 import httpx
+import numpy as np
 import pytest
 import redis
 
@@ -165,3 +169,62 @@ def test_redis_outage_gives_503s_then_work_resumes(
         assert sorted(f["id"] for f in result["fragments"]) == [f.id for f in scene.fragments]
         assert http.get("/readyz").status_code == 200
     client.close()
+
+
+def _upload_started(port: int, path: str, body: bytes, sent: int) -> socket.socket:
+    """A raw HTTP PUT of ``body`` of which only the first ``sent`` bytes go out."""
+    connection = socket.create_connection(("127.0.0.1", port), timeout=10)
+    head = (
+        f"PUT {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/octet-stream\r\n"
+        f"Content-Length: {len(body)}\r\n\r\n"
+    )
+    connection.sendall(head.encode() + body[:sent])
+    return connection
+
+
+def _stored_whole_or_not_at_all(client: redis.Redis, body: bytes) -> bool:
+    """True when ``lab/f0`` is stored whole (record, exact bytes, its job), False when
+    nothing of it is; fails the test on anything in between."""
+    record = client.hgetall("fpj:site:lab:frag:f0")
+    data: Any = client.get("fpj:site:lab:frag:f0:data")
+    entries: Any = client.xrange("fpj:jobs") if client.exists("fpj:jobs") else []
+    jobs = [fields[b"job"] for _, fields in entries]
+    if not record:
+        assert data is None and not jobs and not client.exists("fpj:site:lab:fragments")
+        return False
+    assert data is not None and zlib.decompress(data) == body
+    assert len(jobs) == 1 and b'"fragment_id":"f0"' in jobs[0]
+    return True
+
+
+def test_api_killed_during_an_upload_stores_no_partial_fragment(
+    tmp_path: Path, redis_url: str
+) -> None:
+    """SIGKILL of `jigsaw serve` (external Redis, no workers) while a body streams in, and
+    right after it arrived (while it is checked and stored): never a partial fragment; the
+    same upload afterwards is accepted whole."""
+    raw = redis.Redis.from_url(redis_url)
+    body = encode_ply(np.random.default_rng(0).uniform(-3, 3, size=(300_000, 3)))  # 3.6 MB
+    path = "/v1/sites/lab/fragments/f0"
+    for sent, pause in ((len(body) // 2, 0.5), (len(body), 0.05), (len(body), 0.2)):
+        serve = Serve(tmp_path)
+        serve.env = settings_env(make_settings(redis_url))
+        serve.start()
+        connection = _upload_started(serve.port, path, body, sent)
+        time.sleep(pause)
+        assert serve.stop(signal.SIGKILL) == -signal.SIGKILL
+        connection.close()
+        if sent < len(body):
+            assert not _stored_whole_or_not_at_all(raw, body)
+        elif _stored_whole_or_not_at_all(raw, body):
+            break  # the kill came after the commit: stored whole, as it should be
+    serve = Serve(tmp_path)
+    serve.env = settings_env(make_settings(redis_url))
+    serve.start()
+    try:
+        with httpx.Client(base_url=serve.url, timeout=30) as http:
+            assert http.put(path, content=body).status_code in (200, 202)
+        assert _stored_whole_or_not_at_all(raw, body)
+    finally:
+        serve.stop()
+        raw.close()
