@@ -1,6 +1,14 @@
-"""Presets. The old ones are pinned: the same (preset, seed) gives the same scene, bit for bit,
-whatever options the generator gains (new options default off). The world preset gives valid
-scenes of 2 to 16 fragments in seconds."""
+"""Presets. The old ones are pinned: the same (preset, seed) gives the same room, cuts, poses
+and truth, whatever options the generator gains (new options default off). The world preset
+gives valid scenes of 2 to 16 fragments in seconds.
+
+The sampled points are not pinned across machines: numpy's transcendental functions differ
+in their last bits between SIMD levels (AVX2 and AVX-512 give different ``sin``), and one
+rejection test that flips shifts every later random draw. Seen on 2026-11-23: the same
+scene, room and poses equal, every point different between X86_V3 and X86_V4 machines. So
+the digest covers what the generator decides (rounded to 0.1 mm), and the points are
+checked for determinism on the machine that runs the test.
+"""
 
 from __future__ import annotations
 
@@ -17,38 +25,39 @@ from tests.services.synthetic.checks import assert_valid_polygon
 
 pytestmark = pytest.mark.timeout(60)
 
-# Taken from the generator before the arc cuts, shape families and scanner options existed.
+# Taken on 2026-11-23 from the generator as it was (scenes unchanged since before the arc
+# cuts, shape families and scanner options); equal with numpy's SIMD at X86_V2 and X86_V3.
 PINNED = {
-    ("easy", 0): "bc4b9dc88eab7cd8",
-    ("easy", 1): "660d7b06bc3f9727",
-    ("paper", 0): "50bd8eab92342113",
-    ("paper", 1): "8348daa3a1c21e55",
-    ("hard", 0): "d7311c7441831e45",
-    ("hard", 1): "3ce4d66dbbbf1dbb",
-    ("stress", 0): "a56aae5ce54cfba1",
-    ("stress", 1): "a033f984c6eeafc0",
+    ("easy", 0): "c928664c06bd2a20",
+    ("easy", 1): "90762940b328113f",
+    ("paper", 0): "7806164f65df38b3",
+    ("paper", 1): "789d26aa1f03e49e",
+    ("hard", 0): "f51c8aaa3757e241",
+    ("hard", 1): "4cd5f001f8b7003f",
+    ("stress", 0): "3d6f46bd1e7008fc",
+    ("stress", 1): "f4550f577d7e2597",
 }
-PINNED_FULL_PAPER_SEED_3 = "6138ef8c948a7222"
+PINNED_FULL_PAPER_SEED_3 = "b3aa070f5ab92237"
 
 
 def scene_digest(scene: SyntheticScene) -> str:
-    """SHA-256 (16 hex digits) of the polygon and every fragment's arrays and truth.
+    """SHA-256 (16 hex digits) of the polygon, every fragment's truth and its point count.
 
-    Values are rounded to 1e-6 (and -0.0 folded to 0.0) so that last-bit differences of a
-    machine's BLAS cannot change the digest while any real change to the scene does.
+    Values are rounded to 1e-4 (and -0.0 folded to 0.0): last-bit differences between
+    machines cannot change the digest while any real change to the scene does.
     """
     h = hashlib.sha256()
 
     def add(values: object) -> None:
-        h.update((np.round(np.asarray(values, dtype=np.float64), 6) + 0.0).tobytes())
+        h.update((np.round(np.asarray(values, dtype=np.float64), 4) + 0.0).tobytes())
 
     add(scene.polygon)
     add([scene.ceiling_z, scene.diagonal])
     for f in scene.fragments:
         h.update(f.id.encode())
-        for values in (f.points, f.pose, f.keypoints_world, f.keypoints_local, f.centroid_local):
+        for values in (f.pose, f.keypoints_world, f.keypoints_local, f.centroid_local):
             add(values)
-        add([f.diagonal, f.loop_start, f.loop_end, f.loop_index])
+        add([f.diagonal, f.loop_start, f.loop_end, f.loop_index, len(f.points)])
     return h.hexdigest()[:16]
 
 
@@ -60,6 +69,17 @@ def test_presets_are_unchanged(preset: str, seed: int) -> None:
 
 def test_full_paper_scene_is_unchanged() -> None:
     assert scene_digest(generate_scene(SceneSpec.paper(), 3)) == PINNED_FULL_PAPER_SEED_3
+
+
+@pytest.mark.parametrize("preset", ["paper", "world"])
+def test_the_same_seed_gives_the_same_points(preset: str) -> None:
+    spec = replace(getattr(SceneSpec, preset)(), points_per_fragment=(1_000, 1_500))
+    first, second = generate_scene(spec, 5), generate_scene(spec, 5)
+    assert [f.id for f in first.fragments] == [f.id for f in second.fragments]
+    for a, b in zip(first.fragments, second.fragments, strict=True):
+        assert np.array_equal(a.points, b.points)
+    other = generate_scene(spec, 6)
+    assert not np.array_equal(first.fragments[0].points, other.fragments[0].points)
 
 
 WORLD = replace(SceneSpec.world(), points_per_fragment=(1_500, 2_500))
