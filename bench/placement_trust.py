@@ -235,7 +235,7 @@ def cue_table(scenes: Iterable[CachedScene], params: PlacementParams) -> Table:
                     continue
                 side = 0 if (a, b) in true_pairs else 1
                 scores = (
-                    -register_ends(targets[a], sources[b])[0],
+                    -register_ends(targets[a], sources[b]).score,
                     -boundary_mismatch(pieces[a], pieces[b], params),
                     -_conflict(pieces[a], pieces[b]),
                 )

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from schemas.params import PlacementParams
 from services.layout_model import build_polygon
 from services.pipeline import fragment_pose
 from services.placement import Piece, PlacementCandidate, translations_of
@@ -38,14 +39,17 @@ def true_assembly(
 
 
 def candidate_result(
-    cand: PlacementCandidate, pieces: Sequence[Piece], layouts: Mapping[str, LocalLayout]
+    cand: PlacementCandidate,
+    pieces: Sequence[Piece],
+    layouts: Mapping[str, LocalLayout],
+    params: PlacementParams = PlacementParams(),
 ) -> dict[str, Any]:
     """A candidate as a result JSON (poses and floorplan after refinement, as the pipeline
     would report it), for :func:`services.evaluation.evaluate_result`."""
     by_id = {p.id: p for p in pieces}
     chains = [by_id[fid] for fid in cand.order]
     translations = translations_of(pieces, cand)
-    refined = refine_translations(chains, cand.rotations, translations)
+    refined = refine_translations(chains, cand.rotations, translations, params)
     if refined.status == "solved" or refined.status.startswith("relaxed"):
         translations = refined.translations
     fragments = [

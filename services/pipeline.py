@@ -123,7 +123,7 @@ def _concrete(
     """Refine an assembly's translations and build its poses and floorplan."""
     ordered = [pieces[fid] for fid in cand.order]
     if cand.missing == 0:
-        refined = refine_translations(ordered, cand.rotations, translations)
+        refined = refine_translations(ordered, cand.rotations, translations, params.placement)
     else:
         # An open chain is already joined end to end; there is no loop to refine.
         refined = Refinement(translations, "skipped: open chain", 0.0, 0.0)

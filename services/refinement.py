@@ -1,8 +1,14 @@
 """Pose refinement: translations that join neighbouring wall chains (paper 3.3).
 
-A quadratic program over one 2D translation per piece (the first stays put) minimises the
-squared gaps between each piece's target and the next piece's source, subject to the
-paper's junction constraints:
+A quadratic program over one 2D translation per piece (the first stays put) minimises how
+unlikely each junction's displacement (the next piece's source less this piece's target)
+is, per axis, subject to the paper's junction constraints. The displacement model is the
+placement's (:func:`services.placement.energy.junction_displacement`): a straight junction
+hides an overlap or gap along its wall, a turning one some unseen wall either side of its
+corner, and both carry keypoint noise. Where the two ends' structure registers sharply
+(``EndMatch.measured_shift``), the overlap along the wall is measured, not guessed: this is
+what fixes a room's length when all its cuts are mid-wall. A measurement the solution
+disagrees with by far is dropped and the problem solved again.
 
 * parallel junction: the two walls are collinear (equal offset) and neither overruns the
   other's far end;
@@ -22,15 +28,20 @@ import osqp
 from numpy.typing import NDArray
 from scipy import sparse
 
+from schemas.params import PlacementParams
 from services.placement import Piece, rot90
+from services.placement.energy import JunctionNoise, junction_displacement
+from services.placement.evidence import end_voxels, register_ends
 from services.placement.pieces import UNIT
 from services.types import FloatArray
 
-__all__ = ["Refinement", "refine_translations"]
+__all__ = ["Refinement", "measured_shifts", "refine_translations"]
 
 _MARGIN = 1e-3  # m, turns the paper's strict inequalities into solvable ones
 _OFFSET_SLACK = 0.10  # m, largest offset mismatch left between walls joined in parallel
 _OFFSET_WEIGHT = 10.0  # weight of that mismatch against the joints' distance
+_SHIFT_SIGMA = 0.06  # m, spread of a measured overlap (10 cm voxels; median error 3 cm)
+_SHIFT_OUTLIER = 0.25  # m, a measured overlap the solution misses by more is dropped
 
 
 @dataclass(frozen=True)
@@ -66,11 +77,18 @@ class _Problem:
 
 
 def _junction_rows(
-    sites: list[FloatArray], pieces: Sequence[Piece], rotations: Sequence[int], n: int
+    sites: list[FloatArray],
+    pieces: Sequence[Piece],
+    rotations: Sequence[int],
+    noise: JunctionNoise,
+    shifts: Sequence[float | None],
 ) -> _Problem:
-    """The QP's rows: joints pulled together, walls joined in parallel made collinear (a
-    heavily weighted term, within a small slack: measured walls never close a loop
-    exactly), and the paper's no-overrun and no-crossing inequalities."""
+    """The QP's rows: each joint's displacement against its model (per axis, weighted by
+    its spread; ``shifts[i]`` the measured overlap at straight junction i, if any), walls
+    joined in parallel made collinear (a heavily weighted term, within a small slack:
+    measured walls never close a loop exactly), and the paper's no-overrun and
+    no-crossing inequalities."""
+    n = len(pieces)
     dim = 2 * n
     j_rows: list[FloatArray] = []
     g_vals: list[float] = []
@@ -80,8 +98,15 @@ def _junction_rows(
         k = (i + 1) % n
         q, q_prev = sites[i][-1], sites[i][-2]
         p, p_next = sites[k][0], sites[k][1]
-        d_i = UNIT[(pieces[i].directions[-1] + rotations[i]) % 4]
-        d_k = UNIT[(pieces[k].directions[0] + rotations[k]) % 4]
+        heading_in = (pieces[i].directions[-1] + rotations[i]) % 4
+        heading_out = (pieces[k].directions[0] + rotations[k]) % 4
+        d_i, d_k = UNIT[heading_in], UNIT[heading_out]
+        mean, var = junction_displacement(noise, heading_in, heading_out)
+        shift = shifts[i]
+        if heading_in == heading_out and shift is not None:
+            along = np.abs(d_i) > 0.5
+            mean[along] = shift * d_i[along]
+            var[along] = _SHIFT_SIGMA**2 + noise.keypoint_sigma**2
 
         def diff(vec: FloatArray, i: int = i, k: int = k) -> FloatArray:
             """Row of vec . (t_k - t_i)."""
@@ -90,9 +115,10 @@ def _junction_rows(
             row[2 * i : 2 * i + 2] -= vec
             return row
 
-        for axis in np.eye(2):
-            j_rows.append(-diff(axis))
-            g_vals.append(float(axis @ (p - q)))
+        for axis, mu, sigma in zip(np.eye(2), mean, np.sqrt(var), strict=True):
+            # (p + t_k) - (q + t_i) ~ mu along the axis, in units of its spread.
+            j_rows.append(-diff(axis) / sigma)
+            g_vals.append(float(axis @ (p - q) - mu) / sigma)
         if np.allclose(d_i, d_k):
             normal = np.array([-d_i[1], d_i[0]])
             target = float(normal @ (q - p))
@@ -148,8 +174,29 @@ def _solve(problem: _Problem, keep: NDArray[np.bool_]) -> tuple[str, FloatArray 
     return status, np.asarray(result.x, dtype=np.float64)
 
 
+def measured_shifts(pieces: Sequence[Piece], rotations: Sequence[int]) -> list[float | None]:
+    """The overlap (negative) or gap along the wall at each straight junction of the loop
+    (piece i to piece i + 1, the last to the first) where the two ends' structure pins it
+    down; None elsewhere."""
+    n = len(pieces)
+    out: list[float | None] = []
+    for i in range(n):
+        a, b = pieces[i], pieces[(i + 1) % n]
+        straight = (a.directions[-1] + rotations[i]) % 4 == (
+            b.directions[0] + rotations[(i + 1) % n]
+        ) % 4
+        match = (
+            register_ends(end_voxels(a, "target"), end_voxels(b, "source")) if straight else None
+        )
+        out.append(None if match is None else match.measured_shift)
+    return out
+
+
 def refine_translations(
-    pieces: Sequence[Piece], rotations: Sequence[int], translations: FloatArray
+    pieces: Sequence[Piece],
+    rotations: Sequence[int],
+    translations: FloatArray,
+    params: PlacementParams = PlacementParams(),
 ) -> Refinement:
     """Refine the placement's translations with the constrained QP.
 
@@ -162,6 +209,7 @@ def refine_translations(
     pieces : pieces in loop order.
     rotations : quarter turns per piece, loop order.
     translations : (n, 2) site position of each piece's source from the placement.
+    params : the junction displacement model.
     """
     n = len(pieces)
     if n < 2:
@@ -170,7 +218,45 @@ def refine_translations(
         p.keypoints @ rot90(r).T + t
         for p, r, t in zip(pieces, rotations, translations, strict=True)
     ]
-    problem = _junction_rows(sites, pieces, rotations, n)
+    noise = JunctionNoise.from_params(params)
+    shifts = measured_shifts(pieces, rotations)
+    refined = _refine(sites, pieces, rotations, translations, noise, shifts)
+    missed = _missed_shifts(sites, refined.translations - translations, shifts)
+    if any(missed):
+        kept = [None if miss else shift for shift, miss in zip(shifts, missed, strict=True)]
+        refined = _refine(sites, pieces, rotations, translations, noise, kept)
+    return refined
+
+
+def _missed_shifts(
+    sites: list[FloatArray], moves: FloatArray, shifts: Sequence[float | None]
+) -> list[bool]:
+    """Per junction: a measured overlap the refined joint misses by more than the outlier
+    distance (the registration locked onto look-alike structure)."""
+    n = len(sites)
+    out = []
+    for i, shift in enumerate(shifts):
+        if shift is None:
+            out.append(False)
+            continue
+        q, q_prev = sites[i][-1] + moves[i], sites[i][-2] + moves[i]
+        p = sites[(i + 1) % n][0] + moves[(i + 1) % n]
+        travel = (q - q_prev) / max(float(np.linalg.norm(q - q_prev)), 1e-9)
+        out.append(abs(float(travel @ (p - q)) - shift) > _SHIFT_OUTLIER)
+    return out
+
+
+def _refine(
+    sites: list[FloatArray],
+    pieces: Sequence[Piece],
+    rotations: Sequence[int],
+    translations: FloatArray,
+    noise: JunctionNoise,
+    shifts: Sequence[float | None],
+) -> Refinement:
+    """One solve of the QP (relaxed, or falling back, as :func:`refine_translations` says)."""
+    n = len(pieces)
+    problem = _junction_rows(sites, pieces, rotations, noise, shifts)
     everything = np.ones(len(problem.lo), dtype=bool)
     before = _violation(problem, everything, np.zeros(2 * n))
     status, x = _solve(problem, everything)

@@ -24,7 +24,16 @@ from tests.service_fixtures import (  # noqa: F401  (real Redis 7 / 6.2, uvicorn
     start_workers,
 )
 
-__all__ = ["UNTUNED", "bare_piece", "chains_from_polygon", "small_scene"]
+__all__ = [
+    "CEILING",
+    "FURNITURE",
+    "UNTUNED",
+    "bare_piece",
+    "chains_from_polygon",
+    "end_boxes",
+    "end_shell",
+    "small_scene",
+]
 
 # The placement energy before fitting: unit weights, and the plain Boltzmann share (with a
 # fixed 'none of these' energy) as the confidence. Tests that check energies, ties and
@@ -99,3 +108,36 @@ def bare_piece(piece_id: str, keypoints: np.ndarray) -> Piece:
 def l_room() -> np.ndarray:
     """An L-shaped room, counter-clockwise."""
     return np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], dtype=np.float64)
+
+
+# Junction end regions (a chain end's travel frame: x along the wall, the cut at x = 0,
+# y into the room, z above the floor), for the evidence and refinement tests.
+CEILING = 2.6
+# A table (four legs and a top) and a wall cabinet near a cut.
+FURNITURE = [
+    ((-0.62, 0.60, 0.00), (-0.55, 0.67, 0.75)),
+    ((0.48, 0.60, 0.00), (0.55, 0.67, 0.75)),
+    ((-0.62, 1.33, 0.00), (-0.55, 1.40, 0.75)),
+    ((0.48, 1.33, 0.00), (0.55, 1.40, 0.75)),
+    ((-0.62, 0.60, 0.72), (0.55, 1.40, 0.76)),
+    ((0.10, 0.20, 1.20), (0.35, 0.50, 1.60)),
+]
+
+
+def end_shell(rng: np.random.Generator, seen: tuple[float, float], n: int = 4000) -> np.ndarray:
+    """What every junction shares: the wall (y = 0), the floor and the ceiling."""
+    x = lambda: rng.uniform(*seen, n)  # noqa: E731
+    flat = lambda: rng.normal(0.0, 0.005, n)  # noqa: E731
+    wall = np.column_stack([x(), flat(), rng.uniform(0.0, CEILING, n)])
+    floor = np.column_stack([x(), rng.uniform(0.0, 2.5, n), flat()])
+    ceiling = np.column_stack([x(), rng.uniform(0.0, 2.5, n), CEILING + flat()])
+    return np.vstack([wall, floor, ceiling])
+
+
+def end_boxes(rng, boxes, seen: tuple[float, float], shift: float = 0.0) -> np.ndarray:
+    """Points of boxes (one end's frame) that a scan seeing ``seen`` (that frame) has, in a
+    frame whose origin is ``shift`` along the wall from that end."""
+    pts = np.vstack([rng.uniform(lo, hi, size=(3000, 3)) for lo, hi in boxes])
+    pts = pts[(pts[:, 0] >= seen[0]) & (pts[:, 0] <= seen[1])]
+    pts[:, 0] -= shift
+    return pts

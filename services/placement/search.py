@@ -200,7 +200,7 @@ def _pair_evidence(
         if a != b or n == 1:
             # Coinciding structure is strong evidence for a junction; structure without
             # a counterpart is weak evidence against it (occlusion, clutter that moved).
-            structure[a, b] = min(0.0, register_ends(targets[a], sources[b])[0])
+            structure[a, b] = min(0.0, register_ends(targets[a], sources[b]).score)
             boundary[a, b] = boundary_mismatch(pieces[a], pieces[b], params)
     return structure, boundary
 

@@ -9,50 +9,20 @@ import pytest
 
 from schemas.params import PlacementParams
 from services.placement import Piece
-from services.placement.evidence import boundary_mismatch, end_voxels, register_ends
-from tests.conftest import bare_piece
+from services.placement.evidence import EndMatch, boundary_mismatch, end_voxels, register_ends
+from tests.conftest import CEILING, FURNITURE, bare_piece, end_boxes, end_shell
 
 pytestmark = pytest.mark.timeout(120)
 
-CEILING = 2.6
-# A table (four legs and a top) and a wall cabinet, in the travel frame of a's target end:
-# x along the wall (the cut at x = 0), y into the room, z above the floor.
-FURNITURE = [
-    ((-0.62, 0.60, 0.00), (-0.55, 0.67, 0.75)),
-    ((0.48, 0.60, 0.00), (0.55, 0.67, 0.75)),
-    ((-0.62, 1.33, 0.00), (-0.55, 1.40, 0.75)),
-    ((0.48, 1.33, 0.00), (0.55, 1.40, 0.75)),
-    ((-0.62, 0.60, 0.72), (0.55, 1.40, 0.76)),
-    ((0.10, 0.20, 1.20), (0.35, 0.50, 1.60)),
-]
 SHELF = [((-0.8, 1.8, 1.6), (0.8, 2.2, 2.0))]  # something else entirely
-
-
-def _shell(rng: np.random.Generator, seen: tuple[float, float], n: int = 4000) -> np.ndarray:
-    """What every junction shares: the wall (y = 0), the floor and the ceiling."""
-    x = lambda: rng.uniform(*seen, n)  # noqa: E731
-    flat = lambda: rng.normal(0.0, 0.005, n)  # noqa: E731
-    wall = np.column_stack([x(), flat(), rng.uniform(0.0, CEILING, n)])
-    floor = np.column_stack([x(), rng.uniform(0.0, 2.5, n), flat()])
-    ceiling = np.column_stack([x(), rng.uniform(0.0, 2.5, n), CEILING + flat()])
-    return np.vstack([wall, floor, ceiling])
-
-
-def _boxes(rng, boxes, seen: tuple[float, float], shift: float = 0.0) -> np.ndarray:
-    """Points of boxes (a's frame) that a scan seeing ``seen`` (a's frame) has, in a frame
-    whose origin is ``shift`` along the wall from a's end."""
-    pts = np.vstack([rng.uniform(lo, hi, size=(3000, 3)) for lo, hi in boxes])
-    pts = pts[(pts[:, 0] >= seen[0]) & (pts[:, 0] <= seen[1])]
-    pts[:, 0] -= shift
-    return pts
 
 
 def _a_end(rng, boxes=FURNITURE):
     """a: a straight chain ending at the cut, its scan reaching 0.8 m past its end."""
     seen = (-1.0, 0.8)
     piece = bare_piece("a", np.array([[-3.0, 0.0], [0.0, 0.0]]))
-    region = np.vstack([_shell(rng, seen), _boxes(rng, boxes, seen)]) if boxes else None
-    region = _shell(rng, seen) if region is None else region
+    region = np.vstack([end_shell(rng, seen), end_boxes(rng, boxes, seen)]) if boxes else None
+    region = end_shell(rng, seen) if region is None else region
     return dataclasses.replace(piece, target_region=region, ceiling=CEILING)
 
 
@@ -62,9 +32,9 @@ def _b_start(rng, boxes=FURNITURE, shift: float = 0.0):
     seen_b = (-0.8, 1.0)
     seen_a = (seen_b[0] + shift, seen_b[1] + shift)
     piece = bare_piece("b", np.array([[0.0, 0.0], [3.0, 0.0]]))
-    parts = [_shell(rng, seen_b)]
+    parts = [end_shell(rng, seen_b)]
     if boxes:
-        parts.append(_boxes(rng, boxes, seen_a, shift))
+        parts.append(end_boxes(rng, boxes, seen_a, shift))
     return dataclasses.replace(piece, source_region=np.vstack(parts), ceiling=CEILING)
 
 
@@ -126,17 +96,19 @@ def test_the_same_structure_registers_at_its_shift(shift):
     rng = np.random.default_rng(10)
     a = end_voxels(_a_end(rng), "target")
     b = end_voxels(_b_start(rng, shift=shift), "source")
-    score, found = register_ends(a, b)
-    assert score < -0.9
-    assert abs(found - shift) <= 0.1 + 1e-9
+    match = register_ends(a, b)
+    assert match.score < -0.9
+    assert abs(match.shift - shift) <= 0.1 + 1e-9
+    assert match.measured_shift == match.shift
 
 
 def test_different_structures_count_against_the_junction():
     rng = np.random.default_rng(11)
     a = end_voxels(_a_end(rng), "target")
     b = end_voxels(_b_start(rng, boxes=SHELF), "source")
-    score, _ = register_ends(a, b)
-    assert score > 0.5
+    match = register_ends(a, b)
+    assert match.score > 0.5
+    assert match.measured_shift is None
 
 
 def test_structure_on_one_side_only_counts_against_the_junction():
@@ -144,14 +116,14 @@ def test_structure_on_one_side_only_counts_against_the_junction():
     rng = np.random.default_rng(12)
     a = end_voxels(_a_end(rng), "target")
     b = end_voxels(_b_start(rng, boxes=[]), "source")
-    assert register_ends(a, b)[0] > 0.5
+    assert register_ends(a, b).score > 0.5
 
 
 def test_no_structure_gives_no_evidence():
     rng = np.random.default_rng(13)
     a = end_voxels(_a_end(rng, boxes=[]), "target")
     b = end_voxels(_b_start(rng, boxes=[]), "source")
-    assert register_ends(a, b) == (0.0, 0.0)
+    assert register_ends(a, b) == EndMatch()
 
 
 def test_ends_that_never_see_the_same_stretch_give_no_evidence():
@@ -159,26 +131,24 @@ def test_ends_that_never_see_the_same_stretch_give_no_evidence():
     # than any overlap or gap the registration tries, so there is nothing to compare.
     rng = np.random.default_rng(14)
     box = [((-1.0, 0.6, 0.3), (-0.8, 1.2, 0.9))]
-    a_region = np.vstack([_shell(rng, (-1.0, -0.75)), _boxes(rng, box, (-1.0, -0.75))])
-    b_region = np.vstack([_shell(rng, (0.75, 1.0)), _boxes(rng, box, (-1.0, -0.75), -1.8)])
+    a_region = np.vstack([end_shell(rng, (-1.0, -0.75)), end_boxes(rng, box, (-1.0, -0.75))])
+    b_region = np.vstack([end_shell(rng, (0.75, 1.0)), end_boxes(rng, box, (-1.0, -0.75), -1.8)])
     a_piece, b_piece = _a_end(rng), _b_start(rng)
     a = end_voxels(dataclasses.replace(a_piece, target_region=a_region), "target")
     b = end_voxels(dataclasses.replace(b_piece, source_region=b_region), "source")
     assert a.cells > 10 and b.cells > 10
-    assert register_ends(a, b) == (0.0, 0.0)
+    assert register_ends(a, b) == EndMatch()
 
 
 def test_little_matching_structure_weighs_less():
     rng = np.random.default_rng(15)
     small = [((0.1, 0.2, 1.2), (0.3, 0.4, 1.4))]  # a few voxels
-    strong = register_ends(end_voxels(_a_end(rng), "target"), end_voxels(_b_start(rng), "source"))[
-        0
-    ]
+    strong = register_ends(end_voxels(_a_end(rng), "target"), end_voxels(_b_start(rng), "source"))
     weak = register_ends(
         end_voxels(_a_end(rng, boxes=small), "target"),
         end_voxels(_b_start(rng, boxes=small), "source"),
-    )[0]
-    assert strong < weak < 0.0
+    )
+    assert strong.score < weak.score < 0.0
 
 
 # ---------------------------------------------------------------------------------------------
