@@ -9,7 +9,6 @@ from typing import Annotated, cast
 from fastapi import Depends, Path, Query, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
-from api.backend import Backend
 from api.errors import (
     ForbiddenError,
     HintsNotFoundError,
@@ -20,6 +19,8 @@ from api.errors import (
 from api.hints import load_hints
 from api.store import site_exists
 from schemas.hints import HintsModel
+from schemas.ids import ID_RULE
+from store.backend import Backend
 
 __all__ = [
     "BackendDep",
@@ -32,8 +33,6 @@ __all__ = [
     "require_token",
 ]
 
-_ID_DOC = "1 to 64 characters of [A-Za-z0-9._-]"
-
 
 def get_backend(request: Request) -> Backend:
     """The backend the app's lifespan connected."""
@@ -43,12 +42,12 @@ def get_backend(request: Request) -> Backend:
 BackendDep = Annotated[Backend, Depends(get_backend)]
 
 
-def _site_id(site_id: Annotated[str, Path(description=f"site id, {_ID_DOC}")]) -> str:
+def _site_id(site_id: Annotated[str, Path(description=f"site id, {ID_RULE}")]) -> str:
     return check_id(site_id, "site id")
 
 
 def _fragment_id(
-    fragment_id: Annotated[str, Path(description=f"fragment id, {_ID_DOC}")],
+    fragment_id: Annotated[str, Path(description=f"fragment id, {ID_RULE}")],
 ) -> str:
     return check_id(fragment_id, "fragment id")
 

@@ -15,7 +15,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from schemas.ids import is_valid_id
+from schemas.ids import ID_RULE, is_valid_id
 from schemas.service import ErrorBody, ErrorDetail
 from schemas.validation import summarize_errors
 from services.errors import (
@@ -136,7 +136,7 @@ _STATUS: dict[type[JigsawError], int] = {
 }
 
 _DESCRIPTIONS = {
-    400: "invalid id (1 to 64 characters of [A-Za-z0-9._-], not . or ..)",
+    400: f"invalid id ({ID_RULE})",
     401: "missing bearer token",
     403: "unknown bearer token",
     404: "unknown site or fragment, no hints stored, or nothing placed to export",
@@ -161,9 +161,7 @@ def status_for(exc: JigsawError) -> int:
 def check_id(value: str, what: str) -> str:
     """Return ``value`` if it is a valid site or fragment id, else raise InvalidIdError."""
     if not is_valid_id(value):
-        raise InvalidIdError(
-            f"invalid {what} {value[:80]!r}: use 1 to 64 of [A-Za-z0-9._-], not . or .."
-        )
+        raise InvalidIdError(f"invalid {what} {value[:80]!r}: use {ID_RULE}")
     return value
 
 

@@ -14,10 +14,10 @@ from collections.abc import AsyncIterator
 
 import anyio
 
-from api.backend import Backend
 from api.store import load_result, load_site_status, site_exists
 from schemas.service import PlacementStatus, SiteStatus
-from worker.records import site_event
+from store.backend import Backend
+from store.records import site_event
 
 __all__ = ["format_sse", "site_event_stream"]
 

@@ -16,13 +16,13 @@ import time
 import redis
 from pydantic import ValidationError
 
-from api.backend import Backend
 from api.errors import InvalidHintsError, InvalidPriorError
 from api.store import touch_site
 from schemas.hints import FragmentPrior, HintsModel
 from schemas.validation import summarize_errors
-from worker.connection import abort_watch, begin_multi
-from worker.jobs import request_placement_async
+from store.backend import Backend
+from store.connection import abort_watch, begin_multi
+from store.jobs import request_placement_async
 
 __all__ = [
     "MAX_HINTS_BYTES",

@@ -2,9 +2,9 @@
 
 Order of checks: ids, size, then identical/conflicting bytes already stored (by SHA-256),
 then the same decoder as the CLI (PLY, PCD, or an RGB-D frame's zip archive,
-:func:`api.frames.decode_upload`); only a fragment that parses is stored (its original bytes,
-zlib-compressed) and gets its layout job, all in one WATCH/MULTI transaction. A rejected upload
-leaves the site exactly as it was.
+:func:`services.uploads.decode_upload`); only a fragment that parses is stored (its original
+bytes, zlib-compressed) and gets its layout job, all in one WATCH/MULTI transaction. A
+rejected upload leaves the site exactly as it was.
 """
 
 from __future__ import annotations
@@ -17,17 +17,17 @@ from collections.abc import Mapping
 
 import redis
 
-from api.backend import Backend
 from api.errors import ConflictError, check_id
-from api.frames import decode_upload
 from api.metrics import UPLOAD_BYTES, UPLOADS
 from api.store import touch_site
 from schemas.jobs import FragmentState, LayoutJob, encode_job
 from schemas.service import UploadReply
 from services.errors import FragmentTooLargeError, InvalidFragmentError, JigsawError
 from services.fragments import Fragment, dropped_count, fragment_format, reading_count
-from worker.connection import abort_watch, begin_multi, hash_fields, record
-from worker.records import fragment_status, new_fragment_record, site_event
+from services.uploads import decode_upload
+from store.backend import Backend
+from store.connection import abort_watch, begin_multi, hash_fields, record
+from store.records import fragment_status, new_fragment_record, site_event
 
 __all__ = ["compress", "ingest_fragment"]
 
@@ -44,7 +44,7 @@ async def ingest_fragment(
     backend : Backend
         Settings, Redis client and key names.
     site_id, fragment_id : str
-        1 to 64 characters of ``[A-Za-z0-9._-]``.
+        Each matching :data:`schemas.ids.ID_PATTERN`.
     data : bytes
         The whole PLY or PCD file, or an RGB-D frame's zip archive.
 

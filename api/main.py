@@ -7,13 +7,13 @@ from contextlib import asynccontextmanager
 
 from fastapi import Depends, FastAPI
 
-from api.backend import Backend
 from api.deps import require_stream_token, require_token
 from api.errors import install_error_handlers
 from api.routers import events, fragments, health, hints, metrics, sites
 from api.routers.web import install_web
 from api.zenoh import zenoh_front_end
 from schemas.settings import Settings, get_settings
+from store.backend import Backend
 
 __all__ = ["create_app"]
 

@@ -1,6 +1,6 @@
 """Prometheus metrics: upload counters of this process, job and queue numbers from Redis.
 
-The job numbers are written by every worker into one Redis hash (:mod:`worker.stats`) and
+The job numbers are written by every worker into one Redis hash (:mod:`store.stats`) and
 read at scrape time, so one scrape of any API replica covers all workers.
 """
 
@@ -18,10 +18,10 @@ from prometheus_client.core import (
 )
 from prometheus_client.registry import Collector
 
-from api.backend import Backend
 from api.store import live_workers, queue_counts
-from worker.connection import record
-from worker.stats import Histogram, JobStats, parse_stats
+from store.backend import Backend
+from store.connection import record
+from store.stats import Histogram, JobStats, parse_stats
 
 __all__ = ["ROS_DEPTH_IMAGES", "UPLOADS", "UPLOAD_BYTES", "render_metrics"]
 

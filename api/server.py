@@ -20,7 +20,7 @@ import uvicorn
 from api.main import create_app
 from api.processes import EmbeddedRedis, WorkerSupervisor
 from schemas.settings import Settings, get_settings
-from worker.logs import configure_logging
+from store.logs import configure_logging
 
 __all__ = ["run_server"]
 

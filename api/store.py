@@ -8,14 +8,14 @@ from typing import Any
 import redis
 import redis.asyncio as aioredis
 
-from api.backend import Backend
 from api.errors import FragmentNotFoundError, SiteNotFoundError
-from api.zenoh.presence import load_site_robots
 from schemas.service import FragmentStatus, SiteList, SiteStatus, SiteSummary, utc
-from worker.connection import abort_watch, begin_multi, record, strings
-from worker.jobs import request_placement_async
-from worker.keys import GROUP, Keys
-from worker.records import fragment_status, placement_status, site_event, site_status
+from store.backend import Backend
+from store.connection import abort_watch, begin_multi, record, strings
+from store.jobs import request_placement_async
+from store.keys import GROUP, Keys
+from store.presence import load_site_robots
+from store.records import fragment_status, placement_status, site_event, site_status
 
 __all__ = [
     "delete_fragment",

@@ -30,6 +30,7 @@ from schemas.layout import LocalLayoutWire
 from services.pipeline import estimate_layout
 from services.synthetic import SceneSpec, generate_scene, ground_truth_json
 from services.types import LocalLayout
+from store.layouts import layout_from_wire, layout_to_wire
 
 __all__ = [
     "BUCKETS",
@@ -116,8 +117,7 @@ def _build(job: _Job) -> str:
     outline = None if job.outline is None else np.asarray(job.outline, dtype=np.float64)
     scene = generate_scene(spec, job.seed, outline=outline)
     layouts = {
-        f.id: LocalLayoutWire.from_layout(estimate_layout(f.points)).model_dump()
-        for f in scene.fragments
+        f.id: layout_to_wire(estimate_layout(f.points)).model_dump() for f in scene.fragments
     }
     record = {
         "version": CACHE_VERSION,
@@ -153,6 +153,7 @@ def load_set(jobs: list[_Job]) -> Iterator[CachedScene]:
                 f"{job.path}: cache version {record.get('version')}, want {CACHE_VERSION}"
             )
         layouts = {
-            fid: LocalLayoutWire(**wire).to_layout() for fid, wire in record["layouts"].items()
+            fid: layout_from_wire(LocalLayoutWire(**wire))
+            for fid, wire in record["layouts"].items()
         }
         yield CachedScene(job.name, record["truth"], layouts, float(record["seconds"]))

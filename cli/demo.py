@@ -21,11 +21,12 @@ from rich import box
 from rich.console import Console
 from rich.table import Table
 
-from cli.exports import floorplan_canvas, layout_canvas, layout_model, save_picture, write_model
+from cli.exports import floorplan_canvas, layout_canvas, save_picture, write_model
 from cli.pipeline import AlignRun, align_fragments, fragment_clouds, read_fragments
 from cli.scene_io import read_truth, write_scene
 from schemas.params import PipelineParams
 from services.evaluation import SceneReport, acc_local, evaluate_result
+from services.model_export import layout_model
 from services.synthetic import SceneSpec, generate_scene
 from services.types import FloatArray
 

@@ -24,11 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
-from api.frames import read_frame_archive
 from schemas.frames import IntrinsicsModel
 from schemas.params import PipelineParams
 from services.errors import InvalidIntrinsicsError
 from services.rgbd import COLOR_NAMES, DEPTH_NAME, INTRINSICS_NAME, RgbdFrame, decode_frame
+from services.uploads import read_frame_archive
 
 __all__ = [
     "FrameSource",

@@ -9,8 +9,8 @@ from datetime import UTC, datetime
 import redis
 
 from schemas.settings import get_settings
-from worker.dead_letters import DeadJob, list_dead, retry_dead
-from worker.keys import Keys
+from store.dead_letters import DeadJob, list_dead, retry_dead
+from store.keys import Keys
 
 __all__ = ["run_jobs"]
 

@@ -10,7 +10,7 @@ import typer
 from typer.core import TyperCommand, TyperGroup
 
 if TYPE_CHECKING:
-    from api.zenoh.client import RobotOptions
+    from robot.client import RobotOptions
 
 
 _F = TypeVar("_F", bound=Callable[..., Any])
@@ -211,10 +211,10 @@ SiteOpt = Annotated[str, typer.Option("--site", "-s", help="site id")]
 
 
 def _robot_id(value: str) -> str:
-    from schemas.ids import is_valid_id
+    from schemas.ids import ID_RULE, is_valid_id
 
     if not is_valid_id(value):
-        raise typer.BadParameter("1 to 64 characters of [A-Za-z0-9._-], not . or ..")
+        raise typer.BadParameter(ID_RULE)
     return value
 
 
@@ -247,7 +247,7 @@ def _robot_options(
     timeout: float,
 ) -> RobotOptions:
     """The robot-side zenoh options shared by ``send`` and ``watch``."""
-    from api.zenoh.client import robot_options
+    from robot.client import robot_options
 
     return robot_options(
         connect or ["tcp/127.0.0.1:7447"],
@@ -283,8 +283,8 @@ def send(
     """Send fragments to the service over zenoh (one query each); print each reply."""
     import sys
 
-    from api.zenoh.client import send_fragments
     from cli.preflight import OptionFileError, read_option_file
+    from robot.client import send_fragments
     from schemas.hints import FragmentPrior
 
     known = None
@@ -317,7 +317,7 @@ def watch(
     """Print the site's pose updates over zenoh as they arrive (one JSON per line)."""
     import sys
 
-    from api.zenoh.client import watch_poses
+    from robot.client import watch_poses
 
     options = _robot_options(connect, mode, scout, prefix, robot, token, timeout)
     code = watch_poses(

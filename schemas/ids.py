@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import re
 
-__all__ = ["ID_PATTERN", "ID_REGEX", "is_valid_id"]
+__all__ = ["ID_PATTERN", "ID_REGEX", "ID_RULE", "is_valid_id"]
 
 # 1 to 64 characters of [A-Za-z0-9._-], but not "." or ".." (they name no file or key).
 ID_PATTERN = r"^(?!\.{1,2}$)[A-Za-z0-9._-]{1,64}$"
 ID_REGEX = re.compile(ID_PATTERN)
+ID_RULE = "1 to 64 characters of [A-Za-z0-9._-], not . or .."  # the pattern, for people
 
 
 def is_valid_id(value: str) -> bool:

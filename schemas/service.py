@@ -1,6 +1,6 @@
 """Wire models of the HTTP API and of the events the workers publish (versioned JSON).
 
-Internal records (Redis hashes) are converted to these in :mod:`worker.records`; the result
+Internal records (Redis hashes) are converted to these in :mod:`store.records`; the result
 JSON itself is :class:`schemas.result.ResultModel`. Times are ISO 8601 strings in UTC
 (``2025-01-31T12:00:00.250000Z``).
 """

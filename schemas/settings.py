@@ -17,6 +17,7 @@ from typing import Annotated, Literal, NamedTuple
 from pydantic import Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
+from schemas.ids import is_valid_id
 from schemas.params import ParserLimits, PipelineParams
 
 __all__ = ["DepthTopic", "Settings", "get_settings"]
@@ -24,7 +25,6 @@ __all__ = ["DepthTopic", "Settings", "get_settings"]
 _KEY_PREFIX = r"^[A-Za-z0-9._-]+(/[A-Za-z0-9._-]+)*$"
 _ROS_TOKEN = r"^[A-Za-z][A-Za-z0-9_]*$"
 _ROS_TOPIC = re.compile(r"/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
-_ID = re.compile(r"[A-Za-z0-9._-]{1,64}")
 _ENDPOINT = re.compile(r"[a-z][a-z0-9+-]*/\S+")
 
 
@@ -206,7 +206,7 @@ class Settings(BaseSettings):
     def _check_cloud_topics(cls, value: str) -> str:
         for entry in _endpoints(value):
             topic, _, site = entry.partition("=")
-            if not _ROS_TOPIC.fullmatch(topic.strip()) or not _ID.fullmatch(site.strip()):
+            if not _ROS_TOPIC.fullmatch(topic.strip()) or not is_valid_id(site.strip()):
                 raise ValueError(f"expected /ros/topic=site_id, got {entry!r}")
         return value
 
@@ -215,7 +215,7 @@ class Settings(BaseSettings):
     def _check_depth_topics(cls, value: str) -> str:
         for entry in _endpoints(value):
             image, info, site = _depth_topic(entry)
-            if not all(_ROS_TOPIC.fullmatch(t) for t in (image, info)) or not _ID.fullmatch(site):
+            if not all(_ROS_TOPIC.fullmatch(t) for t in (image, info)) or not is_valid_id(site):
                 raise ValueError(f"expected /ros/image[:/ros/camera_info]=site_id, got {entry!r}")
         return value
 

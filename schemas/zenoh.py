@@ -10,9 +10,18 @@ from typing import Annotated, Literal, get_args
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
-from schemas.ids import is_valid_id
+from schemas.ids import ID_RULE, is_valid_id
+from schemas.result import ResultModel
 
-__all__ = ["POSE_STATUSES", "PoseStatus", "PoseUpdate", "RobotTag", "SenderRecord", "ServiceInfo"]
+__all__ = [
+    "POSE_STATUSES",
+    "PoseStatus",
+    "PoseUpdate",
+    "RobotTag",
+    "SenderRecord",
+    "ServiceInfo",
+    "pose_updates",
+]
 
 PoseStatus = Literal["closed", "ambiguous", "open"]  # result statuses whose poses go out
 POSE_STATUSES: tuple[str, ...] = get_args(PoseStatus)
@@ -24,7 +33,7 @@ class _Wire(BaseModel):
 
 def _valid_id(value: str | None) -> str | None:
     if value is not None and not is_valid_id(value):
-        raise ValueError("an id is 1 to 64 characters of [A-Za-z0-9._-], not . or ..")
+        raise ValueError(f"an id is {ID_RULE}")
     return value
 
 
@@ -38,6 +47,24 @@ class PoseUpdate(_Wire):
     confidence: float = Field(
         0.0, ge=0.0, le=1.0, description="the result's confidence in its main assembly"
     )
+
+
+def pose_updates(result: ResultModel) -> list[PoseUpdate]:
+    """The pose messages of a result: its placed fragments, with its status and confidence
+    (none for a failed result).
+
+    >>> pose_updates(ResultModel(status="failed"))
+    []
+    """
+    if result.status not in POSE_STATUSES:
+        return []
+    return [
+        PoseUpdate(
+            fragment_id=f.id, pose=f.pose, status=result.status, confidence=result.confidence
+        )
+        for f in result.fragments
+        if f.placed and f.pose is not None
+    ]
 
 
 class ServiceInfo(_Wire):
@@ -61,9 +88,7 @@ class RobotTag(_Wire):
 
     model_config = ConfigDict(frozen=True, extra="ignore")
 
-    robot_id: Annotated[str | None, AfterValidator(_valid_id)] = Field(
-        None, description="1 to 64 characters of [A-Za-z0-9._-], not . or .."
-    )
+    robot_id: Annotated[str | None, AfterValidator(_valid_id)] = Field(None, description=ID_RULE)
     token: str | None = None
 
 

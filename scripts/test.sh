@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The one test command: lint, type check, then the test suite against the real Redis.
+# The one test command: lint, type check, layering, then the test suite against the real Redis.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BIN=.venv/bin
@@ -12,4 +12,5 @@ if ! redis-cli -h 127.0.0.1 -p 6379 ping >/dev/null 2>&1; then
 fi
 $BIN/ruff check .
 $BIN/mypy .
+$BIN/lint-imports  # the layering contracts in pyproject.toml
 $BIN/pytest -q "$@"

@@ -1,7 +1,7 @@
 """A fragment is a point cloud (PLY/PCD) or an RGB-D frame: one entry for its layout.
 
-Front ends decode a fragment (:mod:`api.frames`, :mod:`cli.frames`) and call these, so the
-layout stage, the CLI's exports and the service's records treat both kinds alike.
+Front ends decode a fragment (:mod:`services.uploads`, :mod:`cli.frames`) and call these, so
+the layout stage, the CLI's exports and the service's records treat both kinds alike.
 """
 
 from __future__ import annotations

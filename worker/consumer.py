@@ -25,12 +25,12 @@ from schemas.jobs import DeadLetter, LayoutJob, PlacementJob, decode_job
 from schemas.service import ErrorDetail
 from schemas.settings import Settings
 from services.errors import FragmentError, JigsawError
-from worker.connection import REDIS_DOWN, ensure_group, strings
+from store.connection import REDIS_DOWN, ensure_group, strings
+from store.jobs import Extra, ack, dead_letter, retry_later
+from store.keys import GROUP, Keys
+from store.logs import log_fields
+from store.stats import record_job
 from worker.handlers import HANDLERS, Handler
-from worker.jobs import Extra, ack, dead_letter, retry_later
-from worker.keys import GROUP, Keys
-from worker.logs import log_fields
-from worker.stats import record_job
 from worker.updates import JobContext
 
 __all__ = ["Consumer", "Keeper", "LeaseBook"]

@@ -21,8 +21,9 @@ from schemas.layout import LocalLayoutWire
 from schemas.result import FragmentResultModel, ResultModel
 from schemas.service import ErrorDetail
 from services.types import LocalLayout
-from worker.jobs import finish_placement, placement_flag_ttl_ms
-from worker.records import error_fields
+from store.jobs import finish_placement, placement_flag_ttl_ms
+from store.layouts import layout_from_wire, layout_to_wire
+from store.records import error_fields
 from worker.updates import (
     JobContext,
     JobTimeoutError,
@@ -78,8 +79,8 @@ class LayoutHandler:
 
     def run(self, ctx: JobContext, job: LayoutJob | PlacementJob) -> JobReport:
         job = _expect(job, LayoutJob)
-        from api.frames import decode_upload
         from services.fragments import fragment_layout, reading_count
+        from services.uploads import decode_upload
 
         site, fid, sha = job.site_id, job.fragment_id, job.sha256
         record = ctx.client.hgetall(ctx.keys.fragment(site, fid))
@@ -97,7 +98,7 @@ class LayoutHandler:
         parsed = decode_upload(zlib.decompress(blob), ctx.params)
         progress = Progress(ctx, site, (fid, sha))
         layout = fragment_layout(parsed, ctx.params, progress=progress)
-        wire = LocalLayoutWire.from_layout(layout).model_dump_json()
+        wire = layout_to_wire(layout).model_dump_json()
         done = {"state": FragmentState.DONE.value, "stage": "done", "progress": "1"}
         done.update(error_fields("", ""))
         update_fragment(ctx, site, fid, sha, done, layout=wire, place=True)
@@ -175,7 +176,7 @@ def _place(ctx: JobContext, site_id: str, snap: _SiteSnapshot) -> ResultModel:
     if not snap.layouts:
         return _failed_result(snap.fragments)
     layouts: dict[str, LocalLayout] = {
-        fid: LocalLayoutWire.model_validate_json(raw).to_layout()
+        fid: layout_from_wire(LocalLayoutWire.model_validate_json(raw))
         for fid, raw in snap.layouts.items()
     }
     progress = Progress(ctx, site_id, None)

@@ -10,8 +10,8 @@ import socket
 import time
 
 from schemas.settings import get_settings
-from worker.connection import REDIS_DOWN, strings, sync_client
-from worker.keys import Keys
+from store.connection import REDIS_DOWN, strings, sync_client
+from store.keys import Keys
 
 __all__ = ["main"]
 

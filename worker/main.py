@@ -17,10 +17,10 @@ from collections.abc import Callable
 from types import FrameType
 
 from schemas.settings import Settings, get_settings
-from worker.connection import REDIS_DOWN, ensure_group, sync_client
+from store.connection import REDIS_DOWN, ensure_group, sync_client
+from store.keys import Keys
+from store.logs import configure_logging
 from worker.consumer import BLOCK_MS, Consumer, Keeper, LeaseBook
-from worker.keys import Keys
-from worker.logs import configure_logging
 
 __all__ = ["run_worker", "worker_id"]
 

@@ -22,10 +22,10 @@ from schemas.params import PipelineParams
 from schemas.result import ResultModel
 from schemas.settings import Settings
 from services.errors import JigsawError
-from worker.connection import hash_fields, watch
-from worker.jobs import REQUEST_PLACEMENT_FUNCTION, placement_args
-from worker.keys import Keys
-from worker.records import (
+from store.connection import hash_fields, watch
+from store.jobs import REQUEST_PLACEMENT_FUNCTION, placement_args
+from store.keys import Keys
+from store.records import (
     CLOSED_STATUSES,
     error_fields,
     fragment_status,

@@ -108,7 +108,7 @@ async def get_layout_gltf(site_id: ExistingSite, backend: BackendDep) -> Respons
     """Walls, floor and ceiling of a closed room; the walls of the placed fragments
     otherwise (as ``jigsaw align --model x.gltf``). 404 ``layout_not_found`` when the newest
     result places nothing."""
-    from cli.exports import layout_model, mesh_gltf
+    from services.model_export import layout_model, mesh_gltf
 
     body = await load_result(backend, site_id)
     if body is None:

@@ -34,7 +34,7 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import TYPE_CHECKING
 
-from api.backend import Backend
+from store.backend import Backend
 
 if TYPE_CHECKING:
     from api.zenoh.front import ZenohFront

@@ -19,7 +19,7 @@ import zenoh
 
 from api.errors import UnavailableError, error_body
 from services.errors import JigsawError
-from worker.connection import REDIS_DOWN
+from store.connection import REDIS_DOWN
 
 __all__ = ["LoopBridge", "error_of", "reply_error", "reply_json"]
 

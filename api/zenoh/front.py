@@ -26,7 +26,6 @@ from typing import Any
 
 import zenoh
 
-from api.backend import Backend
 from api.errors import SiteNotFoundError, check_id
 from api.store import load_result, site_exists
 from api.zenoh.bridge import LoopBridge, error_of, reply_error, reply_json
@@ -39,7 +38,8 @@ from api.zenoh.ros_bridge import RosBridge
 from schemas.service import UploadReply
 from schemas.zenoh import RobotTag, SenderRecord, ServiceInfo
 from services.errors import JigsawError
-from worker.connection import strings
+from store.backend import Backend
+from store.connection import strings
 
 __all__ = ["Request", "ResultPendingError", "ZenohFront"]
 

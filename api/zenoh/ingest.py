@@ -21,16 +21,16 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from api.backend import Backend
 from api.errors import ForbiddenError, UnauthorizedError
 from api.hints import merge_prior, parse_prior
 from api.ingest import ingest_fragment
-from api.zenoh.presence import record_sender
 from schemas.hints import FragmentPrior
 from schemas.service import UploadReply
 from schemas.validation import summarize_errors
 from schemas.zenoh import RobotTag, SenderRecord
 from services.errors import JigsawError
+from store.backend import Backend
+from store.presence import record_sender
 
 __all__ = [
     "InvalidRequestError",

@@ -21,34 +21,16 @@ import logging
 import zenoh
 from pydantic import ValidationError
 
-from api.backend import Backend
 from api.zenoh.keys import ZenohKeys
 from api.zenoh.ros_bridge import RosBridge
 from schemas.result import ResultModel
-from schemas.zenoh import POSE_STATUSES, PoseUpdate
-from worker.connection import REDIS_DOWN
+from schemas.zenoh import pose_updates
+from store.backend import Backend
+from store.connection import REDIS_DOWN
 
-__all__ = ["ResultPublisher", "pose_updates"]
+__all__ = ["ResultPublisher"]
 
 log = logging.getLogger(__name__)
-
-
-def pose_updates(result: ResultModel) -> list[PoseUpdate]:
-    """The pose messages of a result: its placed fragments, with its status and confidence
-    (none for a failed result).
-
-    >>> pose_updates(ResultModel(status="failed"))
-    []
-    """
-    if result.status not in POSE_STATUSES:
-        return []
-    return [
-        PoseUpdate(
-            fragment_id=f.id, pose=f.pose, status=result.status, confidence=result.confidence
-        )
-        for f in result.fragments
-        if f.placed and f.pose is not None
-    ]
 
 
 class ResultPublisher:

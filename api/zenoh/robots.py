@@ -4,7 +4,7 @@ A robot declares the token for as long as its session is open; zenoh withdraws i
 session closes or its link dies (after the lease, 10 s by default, if the robot vanished
 without closing). The tracker keeps the set in memory (a token may be declared by several
 sessions at once, so each id is counted) and rewrites it to Redis on every change and every
-``ttl / 3`` seconds (:mod:`api.zenoh.presence`).
+``ttl / 3`` seconds (:mod:`store.presence`).
 """
 
 from __future__ import annotations
@@ -18,11 +18,11 @@ from typing import Any
 
 import zenoh
 
-from api.backend import Backend
 from api.zenoh.bridge import LoopBridge
 from api.zenoh.keys import ZenohKeys
-from api.zenoh.presence import clear_presence, write_presence
-from worker.connection import REDIS_DOWN
+from store.backend import Backend
+from store.connection import REDIS_DOWN
+from store.presence import clear_presence, write_presence
 
 __all__ = ["RobotTracker"]
 

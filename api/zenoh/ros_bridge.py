@@ -52,12 +52,10 @@ from typing import Any, Protocol
 import numpy as np
 import zenoh
 
-from api.backend import Backend
 from api.metrics import ROS_DEPTH_IMAGES
 from api.store import load_site_status
 from api.zenoh.bridge import LoopBridge, error_of
 from api.zenoh.ingest import ingest_with_sender
-from api.zenoh.presence import load_senders
 from api.zenoh.ros2 import (
     CAMERA_INFO_TYPE,
     CLOUD_TYPE,
@@ -86,6 +84,8 @@ from schemas.result import ResultModel
 from schemas.settings import DepthTopic
 from schemas.zenoh import POSE_STATUSES, SenderRecord
 from services.occupancy import rasterize_floorplan
+from store.backend import Backend
+from store.presence import load_senders
 
 __all__ = ["MAP_STATUSES", "RosBridge", "cloud_fragment_id", "topic_robot"]
 

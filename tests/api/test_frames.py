@@ -9,10 +9,10 @@ import zipfile
 
 import pytest
 
-from api.frames import decode_upload, read_frame_archive
 from schemas.frames import ArchiveLimits
 from services.errors import ArchiveTooLargeError, InvalidArchiveError
 from services.rgbd import RgbdFrame
+from services.uploads import decode_upload, read_frame_archive
 from tests.frame_fixtures import frame_files, frame_zip, three_frames, zip_files
 from tests.service_fixtures import ApiServer, redis_snapshot, wait_result
 

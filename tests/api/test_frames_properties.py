@@ -1,4 +1,4 @@
-"""Property tests of the one upload decoder (:func:`api.frames.decode_upload`).
+"""Property tests of the one upload decoder (:func:`services.uploads.decode_upload`).
 
 Every kind of body a client may send (PLY, PCD, an RGB-D frame's zip archive; valid,
 mutated, hostile paths, random bytes) decodes to a fragment or raises a
@@ -10,9 +10,9 @@ from __future__ import annotations
 import pytest
 from hypothesis import given, settings
 
-from api.frames import decode_upload
 from schemas.params import ParserLimits, PipelineParams
 from services.errors import FragmentError, InvalidArchiveError
+from services.uploads import decode_upload
 from tests.fuzzing import FUZZ_MIN_POINTS, PROPERTY, fragment_bodies, seed_frame_files, zip_bytes
 
 pytestmark = pytest.mark.timeout(120)

@@ -10,6 +10,8 @@ from typing import Any
 import pytest
 
 from schemas.result import ResultModel
+from store.connection import sync_client
+from store.keys import Keys
 from tests.service_fixtures import (
     ApiServer,
     SiteEvents,
@@ -18,8 +20,6 @@ from tests.service_fixtures import (
     read_events,
     wait_until,
 )
-from worker.connection import sync_client
-from worker.keys import Keys
 from worker.updates import JobContext, store_result
 
 pytestmark = pytest.mark.timeout(30)

@@ -15,6 +15,7 @@ import pytest
 
 from api.colors import fragment_color, fragment_rgb
 from schemas.result import ResultModel
+from store.keys import Keys
 from tests.service_fixtures import (
     ApiServer,
     SiteEvents,
@@ -23,7 +24,6 @@ from tests.service_fixtures import (
     read_events,
     wait_until,
 )
-from worker.keys import Keys
 
 pytestmark = pytest.mark.timeout(60)
 

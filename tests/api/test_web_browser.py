@@ -23,13 +23,13 @@ import pytest
 from api.colors import fragment_color
 from services.point_io import encode_ply
 from services.synthetic import SyntheticScene
+from store.keys import Keys
+from store.records import site_event
 from tests.conftest import small_scene
 from tests.service_fixtures import (
     ROOT,
     ApiServer,
 )
-from worker.keys import Keys
-from worker.records import site_event
 
 pytestmark = pytest.mark.timeout(90)
 

@@ -16,9 +16,6 @@ from cli.exports import (
     aligned_cloud_ply,
     floorplan_canvas,
     layout_canvas,
-    layout_model,
-    mesh_gltf,
-    mesh_ply,
     write_exports,
 )
 from cli.scene_io import TRUTH_FILE, read_truth, write_scene
@@ -31,6 +28,7 @@ from schemas.result import (
     RoomModel,
 )
 from services.layout_model import layout_mesh
+from services.model_export import layout_model, mesh_gltf, mesh_ply
 from services.parsing import parse_fragment
 from services.synthetic import SyntheticScene
 from services.types import LocalLayout, ManhattanFrame

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from schemas.hints import FragmentPrior, HintsModel
-from schemas.layout import LocalLayoutWire
 from schemas.params import PipelineParams, RegistrationParams
 from schemas.result import ResultModel, Status
 from services.evaluation import evaluate_result, polygon_keypoint_error
@@ -84,18 +83,6 @@ def test_nothing_usable_fails_cleanly():
     result = place_site({"a": estimate_layout(floor)})
     assert result.status == "failed"
     assert result.fragments[0].placed is False
-
-
-def test_layout_survives_the_wire_format():
-    scene = small_scene("easy", 0)
-    layout = estimate_layout(scene.fragments[0].points)
-    back = LocalLayoutWire.model_validate_json(
-        LocalLayoutWire.from_layout(layout).model_dump_json()
-    ).to_layout()
-    assert np.array_equal(back.keypoints, layout.keypoints)
-    assert np.array_equal(back.source_boundary, layout.source_boundary)
-    assert np.array_equal(back.footprint, layout.footprint)
-    assert np.array_equal(back.frame.rotation, layout.frame.rotation)
 
 
 def test_two_identical_fragments_give_a_defined_status():

@@ -16,11 +16,11 @@ import redis
 from schemas.jobs import DeadLetter, LayoutJob, encode_job
 from schemas.service import ErrorDetail
 from services.errors import InvalidFragmentError
+from store.connection import ensure_group
+from store.keys import GROUP, Keys
+from store.stats import parse_stats
 from tests.service_fixtures import make_settings
-from worker.connection import ensure_group
 from worker.consumer import Consumer, Keeper, LeaseBook
-from worker.keys import GROUP, Keys
-from worker.stats import parse_stats
 from worker.updates import JobContext
 
 pytestmark = pytest.mark.timeout(30)

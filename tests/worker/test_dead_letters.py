@@ -14,6 +14,7 @@ import pytest
 import redis
 
 from schemas.settings import Settings
+from store.keys import Keys
 from tests.service_fixtures import (
     ROOT,
     ApiServer,
@@ -23,7 +24,6 @@ from tests.service_fixtures import (
     settings_env,
     wait_until,
 )
-from worker.keys import Keys
 
 pytestmark = pytest.mark.timeout(120)
 

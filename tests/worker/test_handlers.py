@@ -12,7 +12,6 @@ from typing import Any
 import pytest
 import redis
 
-from api.backend import Backend
 from api.hints import replace_hints
 from api.ingest import ingest_fragment
 from api.store import delete_fragment, delete_site
@@ -21,10 +20,11 @@ from schemas.jobs import LayoutJob, PlacementJob, decode_job
 from schemas.result import AlternativeModel, ResultModel
 from services.point_io import encode_ply
 from services.synthetic import SceneSpec, SyntheticScene, generate_scene
+from store.backend import Backend
+from store.keys import Keys
 from tests.service_fixtures import make_settings
 from worker.consumer import Consumer, LeaseBook
 from worker.handlers import HANDLERS
-from worker.keys import Keys
 from worker.updates import JobContext, JobTimeoutError, store_result, update_fragment
 
 pytestmark = pytest.mark.timeout(60)

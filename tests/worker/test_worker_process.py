@@ -12,6 +12,7 @@ import pytest
 
 from services.point_io import encode_ply
 from services.synthetic import SceneSpec, SyntheticScene, generate_scene
+from store.keys import GROUP
 from tests.service_fixtures import (
     ApiServer,
     Workers,
@@ -20,7 +21,6 @@ from tests.service_fixtures import (
     wait_until,
     wait_workers_alive,
 )
-from worker.keys import GROUP
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -196,6 +196,12 @@ class Proc:
             self.process.send_signal(sig)
         return self.finish()
 
+    def close(self) -> None:
+        """Close the output pipes (after :meth:`finish`; left open they warn when collected)."""
+        for stream in (self.process.stdout, self.process.stderr):
+            if stream is not None:
+                stream.close()
+
     def describe(self) -> str:
         return f"stdout {self.out[-5:]}, stderr {self.err[-5:]}"
 
@@ -214,4 +220,5 @@ def procs() -> Iterator[Callable[[list[str]], Proc]]:
     for proc in started:
         if proc.process.poll() is None:
             proc.process.kill()
-            proc.process.wait()
+        proc.finish()
+        proc.close()

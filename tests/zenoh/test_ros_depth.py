@@ -14,12 +14,12 @@ import pytest
 import zenoh
 from pydantic import ValidationError
 
-from api.frames import decode_upload
 from api.zenoh import ros2
 from api.zenoh.ros_depth import DepthPair, DepthPairer, frame_archive
 from schemas.settings import DepthTopic
 from services.errors import InvalidDepthError, InvalidIntrinsicsError
 from services.rgbd import RgbdFrame
+from services.uploads import decode_upload
 from tests.frame_fixtures import three_frames
 from tests.service_fixtures import make_settings, wait_until
 from tests.zenoh.conftest import (

@@ -15,7 +15,7 @@ from redis.backoff import ExponentialBackoff
 from redis.retry import Retry
 from redis.typing import EncodableT, FieldT
 
-from worker.keys import GROUP, Keys
+from store.keys import GROUP, Keys
 
 __all__ = [
     "REDIS_DOWN",

@@ -14,10 +14,10 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from api.backend import Backend
 from schemas.service import RobotStatus, utc
 from schemas.zenoh import SenderRecord
-from worker.connection import record, strings
+from store.backend import Backend
+from store.connection import record, strings
 
 __all__ = [
     "clear_presence",

@@ -25,13 +25,12 @@ from typing import Any, TextIO, cast
 
 import zenoh
 
-from api.errors import error_body
 from api.zenoh.config import Mode, ZenohOptions, build_config
 from api.zenoh.keys import ZenohKeys
-from api.zenoh.publisher import pose_updates
 from schemas.hints import FragmentPrior
 from schemas.result import ResultModel
-from schemas.zenoh import ServiceInfo
+from schemas.service import ErrorBody, ErrorDetail
+from schemas.zenoh import ServiceInfo, pose_updates
 from services.errors import FragmentTooLargeError
 
 __all__ = ["RobotOptions", "robot_options", "send_fragments", "watch_poses"]
@@ -137,7 +136,9 @@ def find_service(session: zenoh.Session, options: RobotOptions) -> ServiceInfo |
 
 
 def _error_text(code: str, message: str) -> str:
-    return json.dumps(error_body(code, message), separators=(",", ":"))
+    """The service's error body ``{"error": {"code", "message"}}`` as compact JSON."""
+    body = ErrorBody(error=ErrorDetail(code=code, message=message))
+    return json.dumps(body.model_dump(), separators=(",", ":"))
 
 
 def _reply_text(replies: Any, timeout: float) -> tuple[bool, str]:

@@ -18,10 +18,10 @@ from pydantic import ValidationError
 
 from schemas.jobs import DeadLetter, FragmentState, LayoutJob, PlacementJob, decode_job
 from schemas.settings import Settings
-from worker.connection import hash_fields, record, watch
-from worker.jobs import request_placement
-from worker.keys import Keys
-from worker.records import error_fields
+from store.connection import hash_fields, record, watch
+from store.jobs import request_placement
+from store.keys import Keys
+from store.records import error_fields
 
 __all__ = ["DeadJob", "list_dead", "retry_dead"]
 

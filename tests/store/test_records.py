@@ -6,9 +6,9 @@ import pytest
 
 from schemas.jobs import LayoutJob, PlacementJob, decode_job, encode_job
 from schemas.settings import Settings
-from worker.keys import Keys
-from worker.records import fragment_status, new_fragment_record, placement_status
-from worker.stats import BUCKETS, parse_stats
+from store.keys import Keys
+from store.records import fragment_status, new_fragment_record, placement_status
+from store.stats import BUCKETS, parse_stats
 
 pytestmark = pytest.mark.timeout(10)
 

@@ -1,7 +1,7 @@
 """Every Redis key and channel name of the service, in one place.
 
 Layout (``P`` is the configured prefix, ``S`` a site id, ``F`` a fragment id; ids match
-``[A-Za-z0-9._-]{1,64}`` so they never contain the ``:`` separator):
+:data:`schemas.ids.ID_PATTERN`, so they never contain the ``:`` separator):
 
 ========================  ======  =======================================================
 key                       type    holds

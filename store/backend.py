@@ -9,8 +9,8 @@ from dataclasses import dataclass
 import redis.asyncio as aioredis
 
 from schemas.settings import Settings
-from worker.connection import REDIS_DOWN, async_client, ensure_group_async
-from worker.keys import Keys
+from store.connection import REDIS_DOWN, async_client, ensure_group_async
+from store.keys import Keys
 
 __all__ = ["Backend"]
 

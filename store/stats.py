@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import redis
 
-from worker.keys import Keys
+from store.keys import Keys
 
 __all__ = ["BUCKETS", "Histogram", "JobStats", "parse_stats", "record_job"]
 

@@ -8,10 +8,10 @@ import pytest
 import redis
 
 from schemas.jobs import DeadLetter, PlacementJob, decode_job
+from store.connection import ensure_group
+from store.jobs import ack, dead_letter, finish_placement, request_placement, retry_later
+from store.keys import GROUP, Keys
 from tests.service_fixtures import make_settings
-from worker.connection import ensure_group
-from worker.jobs import ack, dead_letter, finish_placement, request_placement, retry_later
-from worker.keys import GROUP, Keys
 
 pytestmark = pytest.mark.timeout(30)
 

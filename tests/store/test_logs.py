@@ -10,7 +10,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from worker.logs import JsonFormatter, TextFormatter, configure_logging, log_fields
+from store.logs import JsonFormatter, TextFormatter, configure_logging, log_fields
 
 pytestmark = pytest.mark.timeout(10)
 

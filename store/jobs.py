@@ -20,8 +20,8 @@ import redis.asyncio as aioredis
 
 from schemas.jobs import DeadLetter, PlacementJob, PlacementState, encode_job
 from schemas.settings import Settings
-from worker.connection import watch
-from worker.keys import GROUP, Keys
+from store.connection import watch
+from store.keys import GROUP, Keys
 
 __all__ = [
     "REQUEST_PLACEMENT_FUNCTION",

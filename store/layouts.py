@@ -1,0 +1,58 @@
+"""A fragment's local layout in its stored form (``P:site:S:frag:F:layout``) and back.
+
+The layout job writes :class:`schemas.layout.LocalLayoutWire` JSON; the placement job reads
+it. Arrays travel as base64 of little-endian float64, row-major; their shape is implied by
+the column count each field documents.
+"""
+
+from __future__ import annotations
+
+import base64
+
+import numpy as np
+
+from schemas.layout import LocalLayoutWire
+from services.types import FloatArray, LocalLayout, ManhattanFrame
+
+__all__ = ["decode_array", "encode_array", "layout_from_wire", "layout_to_wire"]
+
+
+def encode_array(array: FloatArray) -> str:
+    """Base64 of the array as little-endian float64, row-major (shape travels separately)."""
+    return base64.b64encode(np.ascontiguousarray(array, dtype="<f8").tobytes()).decode("ascii")
+
+
+def decode_array(text: str, columns: int) -> FloatArray:
+    """Inverse of :func:`encode_array` for an (M, columns) array."""
+    flat = np.frombuffer(base64.b64decode(text), dtype="<f8")
+    return flat.reshape(-1, columns).astype(np.float64)
+
+
+def layout_to_wire(layout: LocalLayout) -> LocalLayoutWire:
+    """The wire form of a local layout (keypoints and rotation as lists, arrays in base64)."""
+    return LocalLayoutWire(
+        keypoints=layout.keypoints.tolist(),
+        rotation=layout.frame.rotation.tolist(),
+        floor_z=layout.frame.floor_z,
+        ceiling_z=layout.frame.ceiling_z,
+        source_boundary=encode_array(layout.source_boundary),
+        target_boundary=encode_array(layout.target_boundary),
+        footprint=encode_array(layout.footprint),
+    )
+
+
+def layout_from_wire(wire: LocalLayoutWire) -> LocalLayout:
+    """Inverse of :func:`layout_to_wire`: (K, 2) keypoints, (M, 3) boundaries, (F, 2)
+    footprint, all float64 in the aligned frame."""
+    frame = ManhattanFrame(
+        rotation=np.asarray(wire.rotation, dtype=np.float64),
+        floor_z=wire.floor_z,
+        ceiling_z=wire.ceiling_z,
+    )
+    return LocalLayout(
+        keypoints=np.asarray(wire.keypoints, dtype=np.float64).reshape(-1, 2),
+        frame=frame,
+        source_boundary=decode_array(wire.source_boundary, 3),
+        target_boundary=decode_array(wire.target_boundary, 3),
+        footprint=decode_array(wire.footprint, 2),
+    )

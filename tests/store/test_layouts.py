@@ -1,0 +1,25 @@
+"""The stored form of a local layout: a layout survives the round trip bit for bit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from schemas.layout import LocalLayoutWire
+from services.pipeline import estimate_layout
+from store.layouts import layout_from_wire, layout_to_wire
+from tests.conftest import small_scene
+
+pytestmark = pytest.mark.timeout(300)
+
+
+def test_layout_survives_the_wire_format():
+    scene = small_scene("easy", 0)
+    layout = estimate_layout(scene.fragments[0].points)
+    back = layout_from_wire(
+        LocalLayoutWire.model_validate_json(layout_to_wire(layout).model_dump_json())
+    )
+    assert np.array_equal(back.keypoints, layout.keypoints)
+    assert np.array_equal(back.source_boundary, layout.source_boundary)
+    assert np.array_equal(back.footprint, layout.footprint)
+    assert np.array_equal(back.frame.rotation, layout.frame.rotation)
