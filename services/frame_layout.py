@@ -19,19 +19,26 @@ import numpy as np
 
 from schemas.frames import IntrinsicsModel
 from schemas.params import PipelineParams
-from services.frustum import CameraView
+from services.frustum import CameraView, in_any_view, side_rays
 from services.local_layout import boundary_points, footprint_cells
 from services.manhattan import estimate_manhattan_frame, thin_with_normals
 from services.rgbd import OPTICAL_TO_LEVEL, RgbdFrame, backproject
 from services.types import FloatArray, LocalLayout, ManhattanFrame, ProgressFn
 from services.wall_graph import find_wall_chain
-from services.wall_lines import find_wall_lines
+from services.wall_lines import WallLine, find_wall_lines
 
 _FLAT_COS = float(np.cos(np.radians(10.0)))  # a normal this close to +z: horizontal surface
 _SPACING = 0.03  # m, largest spacing of a frame's points at 4 m (sets the pixel stride)
 _FLOOR_BAND = 0.05  # m, points this close to the floor height lie on the floor
 _MIN_FLOOR_POINTS = 50
 _MIN_HEIGHT, _MAX_HEIGHT = 0.2, 2.5  # m, camera heights over a floor that can be one
+_MAX_EXTENSION = 3.0  # m, farthest a chain end is moved out to the frustum's edge
+_MAX_DOORWAY = 2.0  # m, as services.wall_graph's edges
+_MAX_FURNITURE_DEPTH = 0.75  # m, deepest step into the room read as a furniture front
+_ON_LINE = 0.1  # m, a keypoint this close to a wall's line lies on it
+_SEED_PLANES = 2  # planes peeled off when looking for the floor's normal
+_LEVEL_BIN = 0.02  # m, height histogram bin of the floor search
+_UPRIGHT_SIN = 0.2  # a normal this far from horizontal at most: a standing surface
 
 __all__ = ["FrameCamera", "estimate_frame_layout", "estimate_rgbd_layout", "frame_points"]
 
@@ -63,17 +70,179 @@ def _unit(v: FloatArray) -> FloatArray:
     return v / norm if norm > 0 else v
 
 
-def _floor(
-    aligned: FloatArray, normals: FloatArray, floor_z: float, params: PipelineParams
-) -> float:
-    """The measured floor height (aligned frame, camera at 0) when the frame shows enough
-    floor below the camera, else the assumed camera height below it."""
+def _floor(aligned: FloatArray, normals: FloatArray, params: PipelineParams) -> float:
+    """The floor height (aligned frame, camera at 0).
+
+    The lowest horizontal level below the camera with enough upward-facing points, unless
+    walls reach further down (then that level is a table or bed top hiding the floor): a
+    frame often sees more of a table top than of the floor, and nothing flat lies below the
+    floor. Without a level, the floor lies below the walls' foot and, as far as the frame
+    tells, at the assumed camera height.
+    """
     frame = params.layout.frame
-    on_floor = (normals[:, 2] > _FLAT_COS) & (np.abs(aligned[:, 2] - floor_z) < _FLOOR_BAND)
-    least = max(_MIN_FLOOR_POINTS, frame.min_floor_share * len(aligned))
-    if np.count_nonzero(on_floor) >= least and -_MAX_HEIGHT < floor_z < -_MIN_HEIGHT:
-        return floor_z
-    return -frame.camera_height
+    heights = aligned[normals[:, 2] > _FLAT_COS, 2]
+    heights = heights[(heights > -_MAX_HEIGHT) & (heights < -_MIN_HEIGHT)]
+    standing = aligned[np.abs(normals[:, 2]) < _UPRIGHT_SIN, 2]
+    # The foot of the walls (a low percentile: a few noisy points reach lower).
+    foot = float(np.percentile(standing, 0.5)) if len(standing) >= _MIN_FLOOR_POINTS else 0.0
+    counts = np.bincount(
+        np.floor((heights + _MAX_HEIGHT) / _LEVEL_BIN).astype(np.int64),
+        minlength=int(_MAX_HEIGHT / _LEVEL_BIN) + 2,
+    )
+    # A level's points spread over a bin or two (noise grows with depth squared).
+    strong = np.flatnonzero(np.convolve(counts, np.ones(3), mode="same") >= _MIN_FLOOR_POINTS)
+    if len(strong):
+        guess = (strong[0] + 0.5) * _LEVEL_BIN - _MAX_HEIGHT
+        level = float(np.median(heights[np.abs(heights - guess) < _FLOOR_BAND]))
+        if level <= foot + _FLOOR_BAND:
+            return level
+    return min(foot, -frame.camera_height)
+
+
+def _wall_line(lines: Sequence[WallLine], a: FloatArray, b: FloatArray) -> WallLine | None:
+    """The candidate line the chain's wall from keypoint ``a`` to ``b`` runs on."""
+    step = b - a
+    axis = 0 if abs(step[0]) >= abs(step[1]) else 1
+    travel = 1 if step[axis] > 0 else -1
+    offset = a[1 - axis]
+    for line in lines:  # keypoints sit on their lines' offsets exactly
+        if line.axis == axis and line.travel == travel and abs(line.offset - offset) < 1e-6:
+            return line
+    return None
+
+
+def _edge_crossing(
+    end: FloatArray, outward: FloatArray, views: Sequence[CameraView], side: int
+) -> float | None:
+    """How far (m) from ``end`` along ``outward`` the wall leaves every camera's view
+    through their right (``side`` 0) or left (1) frustum edge; None when it never does."""
+    found = []
+    for view in views:
+        ray = side_rays(view)[side]
+        matrix = np.column_stack([outward, -ray])
+        if abs(np.linalg.det(matrix)) < 1e-9:
+            continue  # the wall runs along the edge
+        reach, along_ray = np.linalg.solve(matrix, view.centre[:2] - end)
+        crossing = end + reach * outward
+        # The union's edge: not inside another camera's view (merged frames).
+        others = [v for v in views if v is not view]
+        if reach > 0 and along_ray > 0 and not in_any_view(others, crossing[None], -1.0)[0]:
+            found.append(float(reach))
+    return min(found) if found else None
+
+
+def _inward_depth(keypoints: FloatArray, k: int, points: FloatArray) -> FloatArray:
+    """How far (m) points lie on the room's side of the chain's wall ``k`` (its line)."""
+    direction = _unit(keypoints[k + 1] - keypoints[k])
+    left = np.array([-direction[1], direction[0]])  # the interior is on the left
+    depth: FloatArray = (points - keypoints[k]) @ left
+    return depth
+
+
+def _shallow(depth: FloatArray) -> bool:
+    return bool(len(depth) and np.all(depth > -_ON_LINE) and np.all(depth < _MAX_FURNITURE_DEPTH))
+
+
+def _flatten_furniture(keypoints: FloatArray) -> FloatArray:
+    """The chain without shallow steps into the room that come back to the wall they left.
+
+    Seen from one camera a wardrobe or shelf against a wall looks like the wall itself: it
+    stands taller than the band the camera sees, and the wall behind it is hidden. A chain
+    that leaves a wall, runs less than ``_MAX_FURNITURE_DEPTH`` into the room and returns to
+    the same line (or ends there) went round such a front; the wall goes straight on. A room's
+    own pillar or recess shallower than that is flattened too (a frame cannot tell them).
+
+    keypoints: (K, 2) float64, aligned frame, source to target.
+    """
+    kp = keypoints.copy()
+    changed = True
+    while changed and len(kp) >= 4:
+        changed = False
+        for k in range(len(kp) - 3):
+            for m in range(len(kp) - 2, k + 1, -1):
+                depth = _inward_depth(kp, k, kp[k + 1 : m + 1])
+                back = abs(_inward_depth(kp, k, kp[m + 1 : m + 2])[0]) < _ON_LINE
+                if back and _shallow(depth) and _same_travel(kp, k, m):
+                    kp = np.vstack([kp[: k + 1], kp[m + 1 :]])
+                    changed = True
+                    break
+            if changed:
+                break
+    return _flatten_ends(kp)
+
+
+def _same_travel(kp: FloatArray, k: int, m: int) -> bool:
+    return bool(_unit(kp[k + 1] - kp[k]) @ _unit(kp[m + 1] - kp[m]) > 0.99)
+
+
+def _flatten_ends(kp: FloatArray) -> FloatArray:
+    """A chain whose last walls step shallowly into the room and end there: the wall it
+    left runs on to the end (and the same at the source)."""
+    for _ in range(2):  # the target end, then (reversed) the source end
+        for k in range(len(kp) - 3, -1, -1):
+            depth = _inward_depth(kp, k, kp[k + 2 :])
+            if len(depth) and _shallow(depth) and np.any(depth > _ON_LINE):
+                direction = _unit(kp[k + 1] - kp[k])
+                run = float((kp[-1] - kp[k]) @ direction)
+                if run > float((kp[k + 1] - kp[k]) @ direction):
+                    kp = np.vstack([kp[: k + 1], kp[k] + run * direction])
+                break
+        kp = _reverse_chain(kp)
+    return kp
+
+
+def _reverse_chain(kp: FloatArray) -> FloatArray:
+    """The same chain walked backwards with the room on its right; reversing twice is a
+    no-op (used to treat the source end like the target end)."""
+    flipped: FloatArray = kp[::-1] * np.array([1.0, -1.0])
+    return flipped
+
+
+def _wall_across(lines: Sequence[WallLine], line: WallLine, start: float, stop: float) -> bool:
+    """True when a seen wall of the other axis meets ``line`` between two of its run
+    coordinates (two cells of slack): the wall turns there, it does not go on."""
+    lo, hi = sorted((start, stop))
+    reach = 2 * line.cell_size
+    for other in lines:
+        if other.virtual or other.axis == line.axis or not lo - reach < other.offset < hi + reach:
+            continue
+        spans = other.segments
+        if np.any((spans[:, 0] - reach <= line.offset) & (spans[:, 1] + reach >= line.offset)):
+            return True
+    return False
+
+
+def _to_frustum_edges(
+    keypoints: FloatArray, lines: Sequence[WallLine], views: Sequence[CameraView]
+) -> FloatArray:
+    """Chain ends moved out along their walls to where the frustum's edges cut them.
+
+    A frame sees its walls up to its image's edges: where the wall evidence stops short of
+    them, furniture, a window or a door hides the rest of a wall that goes on (the next
+    frame's chain starts at that edge). The move is refused where the wall line would run
+    with nothing scanned on the room's side for more than 0.5 m (the wall ended at a corner
+    and what lies beyond was hidden) or through more than 2 m of space seen on both sides
+    (the room opens up there), the WE-graph's own limits for an edge (services.wall_graph).
+
+    keypoints: (K, 2) float64, aligned frame, source (right of the camera) to target (left).
+    """
+    out = keypoints.copy()
+    for side, (end, inner) in enumerate(((0, 1), (-1, -2))):
+        first, second = sorted((end, inner), key=lambda i: i % len(keypoints))
+        line = _wall_line(lines, keypoints[first], keypoints[second])  # in chain order
+        if line is None:
+            continue
+        outward = _unit(keypoints[end] - keypoints[inner])
+        reach = _edge_crossing(keypoints[end], outward, views, side)
+        if reach is None or reach > _MAX_EXTENSION:
+            continue
+        moved = keypoints[end] + reach * outward
+        start, stop = float(keypoints[end][line.axis]), float(moved[line.axis])
+        if not _wall_across(lines, line, start, stop) and (
+            line.crossing_gap(start, stop) <= _MAX_DOORWAY
+        ):
+            out[end] = moved
+    return out
 
 
 def estimate_frame_layout(
@@ -103,12 +272,15 @@ def estimate_frame_layout(
     report = progress or (lambda stage, fraction: None)
     report("manhattan", 0.0)
     cloud = thin_with_normals(points @ OPTICAL_TO_LEVEL.T, params.manhattan)
-    levelled = estimate_manhattan_frame(cloud, params.manhattan)
+    # The level frame's up is within the camera's pitch and roll of the truth (well inside
+    # the tilt limit), so the plane search that only seeds it can stop at the first planes.
+    seed_search = {"max_planes": min(params.manhattan.max_planes, _SEED_PLANES)}
+    levelled = estimate_manhattan_frame(cloud, params.manhattan.model_copy(update=seed_search))
     aligned = cloud.points @ levelled.rotation.T
     normals = cloud.normals @ levelled.rotation.T
     frame = ManhattanFrame(
         rotation=levelled.rotation @ OPTICAL_TO_LEVEL,
-        floor_z=_floor(aligned, normals, levelled.floor_z, params),
+        floor_z=_floor(aligned, normals, params),
         ceiling_z=levelled.ceiling_z,
         n_planes=levelled.n_planes,
         wall_support=levelled.wall_support,
@@ -129,7 +301,7 @@ def estimate_frame_layout(
     if chain is None or len(chain.keypoints) < 2:
         report("done", 1.0)
         return LocalLayout(keypoints=np.zeros((0, 2)), frame=frame, footprint=footprint)
-    kp = chain.keypoints
+    kp = _to_frustum_edges(_flatten_furniture(chain.keypoints), lines, views)
     band, depth = params.layout.end_region_beyond, params.layout.end_region_depth
     report("done", 1.0)
     return LocalLayout(

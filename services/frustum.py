@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from schemas.frames import IntrinsicsModel
 from services.types import FloatArray
 
-__all__ = ["CameraView", "in_any_view", "visible_band"]
+__all__ = ["CameraView", "in_any_view", "side_rays", "visible_band"]
 
 _FLAT = 1e-9
 
@@ -119,20 +119,54 @@ def visible_band(views: Sequence[CameraView], xy: FloatArray) -> tuple[FloatArra
 def in_any_view(
     views: Sequence[CameraView], xy: FloatArray, tolerance_deg: float = 3.0
 ) -> NDArray[np.bool_]:
-    """(M,) True where a floor-plan point lies within some camera's horizontal field of view
-    (its left and right image edges, widened by ``tolerance_deg``), in front of it.
+    """(M,) True where a floor-plan point lies within some camera's frustum projected on the
+    floor plan (the wedge its four corner rays span, widened by ``tolerance_deg``).
+
+    The projection, not the frustum's cut at the camera's height: a camera looking down sees
+    the foot of a wall further out to the side than its eye-level edge (a few degrees at a
+    20 degree pitch), and the chain's ends lie there.
 
     xy : (M, 2) float64, aligned frame.
     """
     points = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-    slack = np.sin(np.radians(tolerance_deg))
     found = np.zeros(len(points), dtype=bool)
+    slack = np.radians(tolerance_deg)
     for view in views:
+        low, high = _wedge(view)
         d = points - view.centre[:2]
-        length = np.linalg.norm(d, axis=1)
-        ok = (d @ view.forward) > 0
-        for n in view.normals[:2]:
-            side = n[:2] / max(float(np.linalg.norm(n[:2])), 1e-12)
-            ok &= d @ side >= -slack * length
-        found |= ok
+        heading = np.arctan2(view.forward[1], view.forward[0])
+        bearing = np.angle(np.exp(1j * (np.arctan2(d[:, 1], d[:, 0]) - heading)))
+        found |= (bearing >= low - slack) & (bearing <= high + slack) & (d @ view.forward > 0)
     return found
+
+
+def _wedge(view: CameraView) -> tuple[float, float]:
+    """Least and greatest bearing (radians, from the heading) of the corner rays' floor-plan
+    projections: each corner ray lies in two adjacent side planes."""
+    n = view.normals  # left, right, top, bottom
+    corners = np.array([np.cross(n[a], n[b]) for a, b in ((0, 2), (2, 1), (1, 3), (3, 0))])
+    flat = corners[:, :2] * np.sign(corners[:, :2] @ view.forward)[:, None]
+    heading = np.arctan2(view.forward[1], view.forward[0])
+    bearing = np.angle(np.exp(1j * (np.arctan2(flat[:, 1], flat[:, 0]) - heading)))
+    return float(bearing.min()), float(bearing.max())
+
+
+def side_rays(view: CameraView) -> FloatArray:
+    """(2, 2) unit floor-plan directions of the frustum's right and left edges at the
+    camera's height: where its right / left side planes cut the horizontal plane through
+    the centre, so the chain's source (right) and target (left) ends lie on them.
+
+    >>> level = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])
+    >>> k = IntrinsicsModel(width=640, height=480, fx=320, fy=320, cx=319.5, cy=239.5)
+    >>> np.round(side_rays(CameraView.from_intrinsics(k, level, np.zeros(3))), 3).tolist()
+    [[0.707, 0.707], [-0.707, 0.707]]
+    """
+    rays = []
+    for n in (view.normals[1], view.normals[0]):  # right edge, then left
+        direction = np.cross(n, [0.0, 0.0, 1.0])[:2]
+        norm = float(np.linalg.norm(direction))
+        if norm < 1e-9:  # a side plane lying flat: the camera looks straight up or down
+            direction, norm = view.forward, 1.0
+        direction = direction / norm
+        rays.append(direction if direction @ view.forward >= 0 else -direction)
+    return np.array(rays)

@@ -1,0 +1,98 @@
+"""RGB-D frame chains: the floor under a table top, furniture fronts flattened into the wall
+behind them, chain ends moved out to the frustum's edges, and the frustum's floor-plan wedge."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from schemas.params import PipelineParams
+from services.frame_layout import _flatten_furniture, _floor, _to_frustum_edges
+from services.frustum import CameraView, in_any_view, side_rays
+from services.synthetic.render import KINECT
+from services.wall_lines import WallLine
+from tests.frame_fixtures import WIDE
+
+pytestmark = pytest.mark.timeout(30)
+
+LEVEL = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # optical -> z up, looking +y
+
+
+def _pitched(degrees: float) -> np.ndarray:
+    a = np.radians(degrees)
+    tilt = np.array([[1.0, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    return tilt @ LEVEL
+
+
+def _patch(z: float, n: int, normal_z: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(n)
+    xy = rng.uniform(-1.0, 1.0, (n, 2)) + np.array([0.0, 3.0])
+    normal = np.array([0.0, np.sqrt(1 - normal_z**2), normal_z])
+    return np.column_stack([xy, np.full(n, z)]), np.tile(normal, (n, 1))
+
+
+def test_the_floor_is_the_lowest_level_unless_walls_reach_lower() -> None:
+    table, table_n = _patch(-0.5, 400)
+    floor, floor_n = _patch(-1.4, 80)
+    wall = np.column_stack([np.zeros(200), np.full(200, 4.0), np.linspace(-1.4, 0.5, 200)])
+    wall_n = np.tile([0.0, -1.0, 0.0], (200, 1))
+    points, normals = np.vstack([table, floor, wall]), np.vstack([table_n, floor_n, wall_n])
+    assert _floor(points, normals, PipelineParams()) == pytest.approx(-1.4, abs=0.02)
+    # The floor hidden under the table: the walls' foot says the table top is no floor.
+    hidden = np.vstack([table, wall]), np.vstack([table_n, wall_n])
+    assert _floor(*hidden, PipelineParams()) == pytest.approx(-1.4, abs=0.02)
+    # Nothing reaches down: the assumed camera height.
+    assert _floor(table[:10], table_n[:10], PipelineParams()) == -1.3
+
+
+def test_a_shallow_step_into_the_room_that_comes_back_is_flattened() -> None:
+    # Along y = 3 travelling -x (room below), a 0.6 m deep front from x = 1 to 0.
+    chain = np.array([[3.0, 3.0], [1.0, 3.0], [1.0, 2.4], [0.0, 2.4], [0.0, 3.0], [-2.0, 3.0]])
+    np.testing.assert_allclose(_flatten_furniture(chain), [[3.0, 3.0], [-2.0, 3.0]])
+    # A 1.5 m deep protrusion is the room's own: kept.
+    deep = chain.copy()
+    deep[2:4, 1] = 1.5
+    np.testing.assert_allclose(_flatten_furniture(deep), deep)
+    # A chain ending on the front: the wall runs on to the end.
+    tail = chain[:4]
+    np.testing.assert_allclose(_flatten_furniture(tail), [[3.0, 3.0], [0.0, 3.0]])
+
+
+def _line(offset: float, travel: int, axis: int = 0) -> WallLine:
+    cells = 200
+    return WallLine(
+        axis=axis,
+        offset=offset,
+        travel=travel,
+        origin=-8.0,
+        cell_size=0.08,
+        high=np.zeros(cells, dtype=bool),
+        segments=np.array([[-1.0, 1.0]]),
+        unsupported=np.zeros(cells, dtype=bool),
+        seen_through=np.zeros(cells, dtype=bool),
+        occupied=np.zeros(cells, dtype=bool),
+    )
+
+
+def test_chain_ends_move_out_to_the_frustum_edges_unless_a_wall_turns() -> None:
+    view = CameraView.from_intrinsics(KINECT, LEVEL, np.zeros(3))
+    right, left = side_rays(view)
+    chain = np.array([[1.0, 3.0], [-1.0, 3.0]])  # a wall at y = 3, room below, travel -x
+    moved = _to_frustum_edges(chain, [_line(3.0, -1)], [view])
+    np.testing.assert_allclose(moved[0], 3.0 / right[1] * right, atol=1e-9)
+    np.testing.assert_allclose(moved[1], 3.0 / left[1] * left, atol=1e-9)
+    # A seen wall meets the line past the target end: the chain ends at that corner.
+    corner = _line(-1.5, 1, axis=1)
+    corner = WallLine(**{**corner.__dict__, "segments": np.array([[2.0, 3.0]])})
+    kept = _to_frustum_edges(chain, [_line(3.0, -1), corner], [view])
+    np.testing.assert_allclose(kept[1], chain[1])
+
+
+def test_the_floor_plan_wedge_of_a_pitched_camera_is_wider_than_its_eye_level_cut() -> None:
+    view = CameraView.from_intrinsics(WIDE, _pitched(-20.0), np.zeros(3))
+    right, _ = side_rays(view)
+    eye = np.arctan2(right[0], right[1])
+    beyond = 3.0 * np.array([np.sin(eye + np.radians(5.0)), np.cos(eye + np.radians(5.0))])
+    assert in_any_view([view], beyond[None], tolerance_deg=0.0)[0]
+    far_out = 3.0 * np.array([np.sin(eye + np.radians(30.0)), np.cos(eye + np.radians(30.0))])
+    assert not in_any_view([view], far_out[None], tolerance_deg=0.0)[0]
