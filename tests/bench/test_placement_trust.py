@@ -33,6 +33,6 @@ def test_overlap_table_counts_every_ordered_pair_once(scene: CachedScene) -> Non
     table = overlap_table([scene])
     pairs, counts = table.columns[0], table.columns[1]
     assert list(pairs.cells) == ["true straight junctions", "false pairs"]
-    true_count, false_count = (int(c) for c in counts.cells)
+    true_count, false_count = (int(str(c)) for c in counts.cells)
     assert true_count == straight
     assert true_count + false_count == len(list(itertools.permutations(usable, 2)))
