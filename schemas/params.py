@@ -111,6 +111,12 @@ class PlacementParams(_Frozen):
     )
     hidden_corner_sigma: float = Field(0.3, gt=0, description="its spread, m")
     keypoint_sigma: float = Field(0.05, gt=0, description="noise of a chain end's position, m")
+    measured_shift_sigma: float = Field(
+        0.06,
+        gt=0,
+        description="spread of an overlap or gap along the wall that the two ends' structure "
+        "measures (10 cm voxels; median error 3 cm on the benchmark's true junctions), m",
+    )
     boundary_band: float = Field(0.10, gt=0, description="paper's boundary band, m")
     boundary_sigma: float = Field(0.10, gt=0, description="sigma of the mismatch CDF, m")
     min_boundary_points: int = Field(50, ge=1)

@@ -40,7 +40,6 @@ __all__ = ["Refinement", "measured_shifts", "refine_translations"]
 _MARGIN = 1e-3  # m, turns the paper's strict inequalities into solvable ones
 _OFFSET_SLACK = 0.10  # m, largest offset mismatch left between walls joined in parallel
 _OFFSET_WEIGHT = 10.0  # weight of that mismatch against the joints' distance
-_SHIFT_SIGMA = 0.06  # m, spread of a measured overlap (10 cm voxels; median error 3 cm)
 _SHIFT_OUTLIER = 0.25  # m, a measured overlap the solution misses by more is dropped
 
 
@@ -101,12 +100,7 @@ def _junction_rows(
         heading_in = (pieces[i].directions[-1] + rotations[i]) % 4
         heading_out = (pieces[k].directions[0] + rotations[k]) % 4
         d_i, d_k = UNIT[heading_in], UNIT[heading_out]
-        mean, var = junction_displacement(noise, heading_in, heading_out)
-        shift = shifts[i]
-        if heading_in == heading_out and shift is not None:
-            along = np.abs(d_i) > 0.5
-            mean[along] = shift * d_i[along]
-            var[along] = _SHIFT_SIGMA**2 + noise.keypoint_sigma**2
+        mean, var = junction_displacement(noise, heading_in, heading_out, shifts[i])
 
         def diff(vec: FloatArray, i: int = i, k: int = k) -> FloatArray:
             """Row of vec . (t_k - t_i)."""

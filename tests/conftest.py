@@ -32,6 +32,7 @@ __all__ = [
     "chains_from_polygon",
     "end_boxes",
     "end_shell",
+    "overlapping_halves",
     "small_scene",
 ]
 
@@ -141,3 +142,24 @@ def end_boxes(rng, boxes, seen: tuple[float, float], shift: float = 0.0) -> np.n
     pts = pts[(pts[:, 0] >= seen[0]) & (pts[:, 0] <= seen[1])]
     pts[:, 0] -= shift
     return pts
+
+
+def overlapping_halves(with_structure: bool) -> list[Piece]:
+    """A 6 x 4 room cut mid-bottom and mid-top: p0 runs right, up and back along the top;
+    p1 left, down and along the bottom, 0.4 m past the cut (the scans overlap there). With
+    structure, a table and a cabinet at the bottom cut appear in both scans."""
+    room = np.array([[0, 0], [6, 0], [6, 4], [0, 4]], dtype=np.float64)
+    p0, p1 = chains_from_polygon(room, [3.0, 16.0], [0, 0])
+    keypoints = p1.keypoints.copy()
+    keypoints[-1, 0] += 0.4
+    p1 = dataclasses.replace(p1, keypoints=keypoints)
+    if with_structure:
+        rng = np.random.default_rng(3)
+        seen = (-1.0, 0.8)  # p1's scan at its target end; p0's sees -0.8 to 1.0 of its own
+        target = np.vstack([end_shell(rng, seen), end_boxes(rng, FURNITURE, seen)])
+        source = np.vstack(
+            [end_shell(rng, (-0.8, 1.0)), end_boxes(rng, FURNITURE, (-1.2, 0.6), -0.4)]
+        )
+        p1 = dataclasses.replace(p1, target_region=target, ceiling=CEILING)
+        p0 = dataclasses.replace(p0, source_region=source, ceiling=CEILING)
+    return [p0, p1]

@@ -58,6 +58,7 @@ class JunctionNoise:
     turn_mean: float
     turn_sigma: float
     keypoint_sigma: float
+    measured_sigma: float = 0.06
 
     @classmethod
     def from_params(cls, params: PlacementParams) -> JunctionNoise:
@@ -67,6 +68,7 @@ class JunctionNoise:
             params.hidden_corner_mean,
             params.hidden_corner_sigma,
             params.keypoint_sigma,
+            params.measured_shift_sigma,
         )
 
 
@@ -86,12 +88,19 @@ def feature_weights(params: PlacementParams) -> FloatArray:
 
 
 def junction_displacement(
-    noise: JunctionNoise, heading_in: int, heading_out: int
+    noise: JunctionNoise, heading_in: int, heading_out: int, measured: float | None = None
 ) -> tuple[FloatArray, FloatArray]:
-    """Mean (2,) and variance (2,) of one junction's hidden displacement."""
+    """Mean (2,) and variance (2,) of one junction's hidden displacement.
+
+    measured: the overlap (negative) or gap along the wall at a straight junction that the
+    two ends' structure measured (``EndMatch.measured_shift``), if any.
+    """
     mean, var = np.zeros(2), np.full(2, noise.keypoint_sigma**2)
     d_in, d_out = UNIT[heading_in % 4], UNIT[heading_out % 4]
-    if heading_in % 4 == heading_out % 4:
+    if heading_in % 4 == heading_out % 4 and measured is not None:
+        mean += measured * d_in
+        var += noise.measured_sigma**2 * np.abs(d_in)
+    elif heading_in % 4 == heading_out % 4:
         mean += noise.straight_mean * d_in
         var += noise.straight_sigma**2 * np.abs(d_in)
     else:

@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
 from services.placement import place_pieces, rot90, translations_of
 from services.placement.search import evaluate_placement
 from services.refinement import measured_shifts, refine_translations
-from tests.conftest import CEILING, FURNITURE, chains_from_polygon, end_boxes, end_shell
+from tests.conftest import chains_from_polygon, overlapping_halves
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -65,32 +63,11 @@ def test_unsolvable_input_falls_back_to_the_placement():
     assert np.array_equal(refined.translations, translations, equal_nan=True)
 
 
-def _overlapping_halves(with_structure: bool):
-    """A 6 x 4 room cut mid-bottom and mid-top: p0 runs right, up and back along the top;
-    p1 left, down and along the bottom, 0.4 m past the cut (the scans overlap there). With
-    structure, a table and a cabinet at the bottom cut appear in both scans."""
-    room = np.array([[0, 0], [6, 0], [6, 4], [0, 4]], dtype=np.float64)
-    p0, p1 = chains_from_polygon(room, [3.0, 16.0], [0, 0])
-    keypoints = p1.keypoints.copy()
-    keypoints[-1, 0] += 0.4
-    p1 = dataclasses.replace(p1, keypoints=keypoints)
-    if with_structure:
-        rng = np.random.default_rng(3)
-        seen = (-1.0, 0.8)  # p1's scan at its target end; p0's sees -0.8 to 1.0 of its own
-        target = np.vstack([end_shell(rng, seen), end_boxes(rng, FURNITURE, seen)])
-        source = np.vstack(
-            [end_shell(rng, (-0.8, 1.0)), end_boxes(rng, FURNITURE, (-1.2, 0.6), -0.4)]
-        )
-        p1 = dataclasses.replace(p1, target_region=target, ceiling=CEILING)
-        p0 = dataclasses.replace(p0, source_region=source, ceiling=CEILING)
-    return [p0, p1]
-
-
 @pytest.mark.parametrize(("with_structure", "overlap"), [(True, -0.4), (False, -0.2)])
 def test_an_overlap_the_structure_measures_takes_the_loop_gap(with_structure, overlap):
     # The loop's 0.4 m gap must go somewhere. Unmeasured, the two straight junctions share
     # it (the room comes out 0.2 m long); measured, the bottom junction takes all of it.
-    pieces = _overlapping_halves(with_structure)
+    pieces = overlapping_halves(with_structure)
     cand = evaluate_placement(pieces, ["p0", "p1"], [0, 0])
     assert cand is not None
     shifts = measured_shifts(pieces, [0, 0])

@@ -14,6 +14,7 @@ from services.placement.energy import (
     hull_edges,
     junction_displacement,
 )
+from services.placement.pieces import UNIT
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -97,8 +98,22 @@ def test_junction_noise_from_params():
         hidden_corner_mean=0.3,
         hidden_corner_sigma=0.25,
         keypoint_sigma=0.02,
+        measured_shift_sigma=0.04,
     )
-    assert JunctionNoise.from_params(params) == JunctionNoise(-0.1, 0.2, 0.3, 0.25, 0.02)
+    assert JunctionNoise.from_params(params) == JunctionNoise(-0.1, 0.2, 0.3, 0.25, 0.02, 0.04)
+
+
+@pytest.mark.parametrize("heading", range(4))
+def test_a_measured_overlap_replaces_the_model_along_the_wall(heading):
+    mean, var = junction_displacement(NOISE, heading, heading, measured=-0.4)
+    along = np.abs(UNIT[heading]) > 0.5
+    assert mean[along] == pytest.approx(-0.4 * UNIT[heading][along])
+    assert var[along] == pytest.approx(NOISE.keypoint_sigma**2 + NOISE.measured_sigma**2)
+    assert mean[~along] == 0.0 and var[~along] == pytest.approx(NOISE.keypoint_sigma**2)
+    # A turning junction has no overlap along one wall to measure: the model stands.
+    turned = junction_displacement(NOISE, heading, heading + 1, measured=-0.4)
+    model = junction_displacement(NOISE, heading, heading + 1)
+    assert np.array_equal(turned[0], model[0]) and np.array_equal(turned[1], model[1])
 
 
 # ---------------------------------------------------------------------------------------------
