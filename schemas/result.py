@@ -47,6 +47,14 @@ class FragmentResultModel(_Open):
         None, description="4x4 row-major, maps fragment-local points to the site frame"
     )
     loop_index: int | None = Field(None, description="position in the counter-clockwise loop")
+    confidence: float | None = Field(
+        None,
+        ge=0.0,
+        le=1.0,
+        description="probability that this fragment's pose is right (relative to the main "
+        "assembly's first fragment): the main assembly's probability plus that of every "
+        "alternative placing it the same way; null when no room was closed",
+    )
     local_layout: LocalLayoutModel = Field(default_factory=LocalLayoutModel)
 
 

@@ -31,6 +31,7 @@ __all__ = [
     "CALIBRATION_FEATURES",
     "Assembly",
     "calibration_features",
+    "fragment_confidences",
     "rank_assemblies",
     "same_room_groups",
 ]
@@ -151,6 +152,40 @@ def rank_assemblies(
         )
         for g in order
     ]
+
+
+def fragment_confidences(
+    main: Assembly, assemblies: Sequence[Assembly], share: float
+) -> dict[str, float]:
+    """Per fragment of ``main``: the probability that its pose is right.
+
+    A robot can act on its own pose when every likely room places it alike, even if the
+    rooms differ elsewhere: the fragment's probability sums those of the assemblies that
+    give it the main's rotation and a source within ``share`` of the main floorplan's
+    diagonal. Poses are compared in the search's frame, where the first fragment is fixed
+    in every assembly (so its own confidence is the mass of all the rooms found).
+    """
+    span = main.polygon.max(axis=0) - main.polygon.min(axis=0) if len(main.polygon) else 0.0
+    tolerance = share * float(np.linalg.norm(span))
+    reference = _poses(main)
+    out = dict.fromkeys(reference, 0.0)
+    for assembly in assemblies:
+        poses = _poses(assembly)
+        for fid, (rotation, source) in reference.items():
+            other_rotation, other_source = poses.get(fid, (None, source))
+            moved = float(np.linalg.norm(other_source - source))
+            if other_rotation == rotation and moved <= tolerance:
+                out[fid] += assembly.probability
+    return {fid: min(1.0, value) for fid, value in out.items()}
+
+
+def _poses(assembly: Assembly) -> dict[str, tuple[int, FloatArray]]:
+    """Fragment id -> (quarter turns, source position) of an assembly, search frame."""
+    cand = assembly.candidate
+    return {
+        fid: (rotation, assembly.translations[k])
+        for k, (fid, rotation) in enumerate(zip(cand.order, cand.rotations, strict=True))
+    }
 
 
 def _same_room(a: FloatArray, b: FloatArray, share: float) -> bool:

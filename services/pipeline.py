@@ -24,7 +24,7 @@ from schemas.result import (
     ResultModel,
     RoomModel,
 )
-from services.confidence import Assembly, rank_assemblies
+from services.confidence import Assembly, fragment_confidences, rank_assemblies
 from services.layout_model import build_polygon
 from services.local_layout import estimate_local_layout
 from services.placement import (
@@ -356,10 +356,15 @@ def place_site(
         alternatives = [_to_hints_frame(alt, site_hints, layouts) for alt in alternatives]
     status, confidence = _status(main, alternatives, len(usable), len(layouts), params)
     alternatives = _reported(alternatives, status, params)
+    sure: dict[str, float] = {}
+    if status != "open" and main.assembly is not None:
+        share = params.placement.same_room_share
+        sure = fragment_confidences(main.assembly, assemblies, share)
     for index, fid in enumerate(main.candidate.order):
         fragments[fid].placed = True
         fragments[fid].pose = main.poses[fid].tolist()
         fragments[fid].loop_index = index
+        fragments[fid].confidence = sure.get(fid)
     height = _room_height([layouts[fid] for fid in usable])
     contradicted = _contradicted_hints(main, site_hints, layouts)
     diagnostics = _diagnostics(placement, main, assemblies, contradicted)

@@ -345,3 +345,38 @@ def test_two_pieces_that_close_within_the_tolerance_make_a_room():
     assert result.status == "closed"
     polygon = np.array(result.floorplan.rooms[0].polygon)
     assert abs(signed_area(polygon)) == pytest.approx(60.0, rel=0.05)
+
+
+def test_each_fragment_says_how_sure_its_own_pose_is():
+    # The L room's two swappable pieces: the fragments both rooms place alike are surer
+    # than the room; those the rooms disagree on are about as sure as the main room (an
+    # unlikely third room may place them alike).
+    layouts = _hand_layouts([1.0, 9.5, 14.0, 20.0])
+    result = place_site(layouts, PipelineParams(placement=UNTUNED))
+    assert result.status == "ambiguous"
+    alternative = {f.id: np.array(f.pose) for f in result.alternatives[0].fragments}
+    alike = {
+        f.id: np.allclose(np.array(f.pose), alternative[f.id], atol=0.05) for f in result.fragments
+    }
+    assert any(alike.values()) and not all(alike.values())
+    for fragment in result.fragments:
+        assert fragment.confidence is not None
+        if alike[fragment.id]:
+            assert (
+                fragment.confidence > result.confidence + 0.5 * result.alternatives[0].probability
+            )
+        else:
+            assert fragment.confidence == pytest.approx(result.confidence, abs=0.01)
+
+
+def test_fragment_confidence_is_at_least_the_rooms_when_closed_and_absent_when_open():
+    closed = place_site(_scene_layouts(0))
+    assert closed.status == "closed"
+    assert all(
+        f.confidence is not None and f.confidence >= closed.confidence - 1e-9
+        for f in closed.fragments
+    )
+    layouts = _scene_layouts(0)
+    alone = place_site({fid: layouts[fid] for fid in list(layouts)[:1]})
+    assert alone.status == "open"
+    assert all(f.confidence is None for f in alone.fragments)
