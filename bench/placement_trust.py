@@ -26,6 +26,7 @@ import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from rich import box
@@ -78,10 +79,40 @@ class Outcome:
     pose: list[tuple[float, float]]  # (rotation deg, translation % diag) per placed fragment
     layout_error: float | None
     seconds: float
+    # (the fragment's own confidence, its pose right relative to the loop's first fragment)
+    fragments: list[tuple[float, bool]] = dataclasses.field(default_factory=list)
 
     @property
     def bucket(self) -> str:
         return bucket_of(self.n)
+
+
+def fragment_checks(result: dict[str, Any], truth: dict[str, Any]) -> list[tuple[float, bool]]:
+    """Each fragment's confidence and whether its pose is right relative to the loop's
+    first fragment (within 10 degrees, its centroid within 5 % of the diagonal): what a
+    robot acting on its own pose in the result's frame needs."""
+    placed = [
+        f
+        for f in result["fragments"]
+        if f.get("confidence") is not None and f.get("pose") is not None
+    ]
+    if not placed:
+        return []
+    true = {f["id"]: f for f in truth["fragments"]}
+    root = min(placed, key=lambda f: f["loop_index"])
+    est_root, true_root = np.asarray(root["pose"]), np.asarray(true[root["id"]]["pose"])
+    out = []
+    for fragment in placed:
+        truth_f = true[fragment["id"]]
+        estimated = np.linalg.inv(est_root) @ np.asarray(fragment["pose"])
+        expected = np.linalg.inv(true_root) @ np.asarray(truth_f["pose"])
+        turn = (np.linalg.inv(expected) @ estimated)[:3, :3]
+        angle = math.degrees(math.acos(float(np.clip((np.trace(turn) - 1.0) / 2.0, -1.0, 1.0))))
+        centroid = np.append(np.asarray(truth_f["centroid_local"], dtype=np.float64)[:3], 1.0)
+        moved = float(np.linalg.norm((estimated @ centroid - expected @ centroid)[:2]))
+        right = angle < 10.0 and moved < 0.05 * float(truth["diagonal"])
+        out.append((float(fragment["confidence"]), right))
+    return out
 
 
 def run_scene(
@@ -107,6 +138,7 @@ def run_scene(
         pose=[(e.rotation_deg, e.translation_pct) for e in report.pose_errors.values()],
         layout_error=report.layout_error_pct[0] if report.layout_error_pct else None,
         seconds=seconds,
+        fragments=fragment_checks(result, scene.truth),
     )
 
 
@@ -186,6 +218,32 @@ def reliability_table(outcomes: Sequence[Outcome]) -> Table:
         )
     brier = float(np.mean((confidence - right) ** 2)) if len(right) else math.nan
     table.caption = f"Brier score {brier:.3f} over {len(right)} results"
+    return table
+
+
+def fragment_reliability_table(outcomes: Sequence[Outcome]) -> Table:
+    """Each fragment's own confidence against the share of fragments placed right."""
+    table = Table(
+        title="Per-fragment reliability: a fragment's confidence vs its pose right",
+        title_justify="left",
+        box=box.SIMPLE,
+    )
+    for header in ("confidence", "fragments", "in ambiguous results", "right %"):
+        table.add_column(header, justify="right")
+    checks = [(c, r, o.status) for o in outcomes for c, r in o.fragments]
+    confidence = np.array([c for c, _, _ in checks])
+    right = np.array([r for _, r, _ in checks])
+    ambiguous = np.array([s == "ambiguous" for _, _, s in checks])
+    for lo, hi in itertools.pairwise(CONFIDENCE_BINS):
+        inside = (confidence >= lo) & (confidence < hi)
+        if not inside.any():
+            continue
+        table.add_row(
+            f"[{lo:.2f}, {min(hi, 1.0):.2f}{']' if hi > 1 else ')'}",
+            str(int(inside.sum())),
+            str(int((inside & ambiguous).sum())),
+            f"{100 * right[inside].mean():.1f}",
+        )
     return table
 
 
@@ -445,6 +503,7 @@ def main(argv: list[str] | None = None) -> int:
         args.dump.write_text(json.dumps([dataclasses.asdict(o) for o in outcomes]))
     console.print(bucket_table(outcomes, f"Placement on '{args.split}' scenes (world preset)"))
     console.print(reliability_table(outcomes))
+    console.print(fragment_reliability_table(outcomes))
     if args.cues_scenes:
         console.print(cue_table(scenes[: args.cues_scenes], PlacementParams()))
         console.print(overlap_table(scenes[: args.cues_scenes]))

@@ -5,9 +5,10 @@ from __future__ import annotations
 import dataclasses
 import itertools
 
+import numpy as np
 import pytest
 
-from bench.placement_trust import overlap_table
+from bench.placement_trust import fragment_checks, overlap_table
 from bench.world_scenes import CachedScene
 from services.pipeline import estimate_layout
 from services.synthetic import SceneSpec, generate_scene, ground_truth_json
@@ -36,3 +37,28 @@ def test_overlap_table_counts_every_ordered_pair_once(scene: CachedScene) -> Non
     true_count, false_count = (int(str(c)) for c in counts.cells)
     assert true_count == straight
     assert true_count + false_count == len(list(itertools.permutations(usable, 2)))
+
+
+def test_fragment_checks_judge_each_pose_relative_to_the_first(scene: CachedScene) -> None:
+    truth = scene.truth
+    fragments = [
+        {"id": f["id"], "pose": f["pose"], "loop_index": f["loop_index"], "confidence": 0.9}
+        for f in truth["fragments"]
+    ]
+    result = {"fragments": fragments}
+    assert [right for _, right in fragment_checks(result, truth)] == [True] * len(fragments)
+    # The whole site moved: every pose is still right relative to the first.
+    shifted = np.eye(4)
+    shifted[:3, 3] = [5.0, -3.0, 0.0]
+    moved = [{**f, "pose": (shifted @ np.asarray(f["pose"])).tolist()} for f in fragments]
+    assert all(right for _, right in fragment_checks({"fragments": moved}, truth))
+    # One fragment 2 m off: only it is wrong; no confidence, no check.
+    last = max(fragments, key=lambda f: f["loop_index"])
+    off = np.asarray(last["pose"]).copy()
+    off[0, 3] += 2.0
+    broken = [{**f, "pose": off.tolist()} if f is last else f for f in fragments]
+    verdicts = fragment_checks({"fragments": broken}, truth)
+    checks = dict(zip([f["id"] for f in broken], verdicts, strict=True))
+    assert [fid for fid, (_, right) in checks.items() if not right] == [last["id"]]
+    unsure = [{**f, "confidence": None} for f in fragments]
+    assert fragment_checks({"fragments": unsure}, truth) == []
