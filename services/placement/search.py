@@ -123,6 +123,7 @@ class _Search:
     frame: FrameEstimate | None = field(init=False)  # the hints frame's yaw, from priors
     rotation_cost: FloatArray = field(init=False)  # [j, r]: prior cost of rotation r
     reach: FloatArray = field(init=False)  # [j, d]: piece j's reach along direction d
+    chain_ends: FloatArray = field(init=False)  # [j, r]: piece j's target at rotation r
     displacement: list[list[tuple[FloatArray, FloatArray]]] = field(init=False)  # [in][out]
     top: list[tuple[float, int, PlacementCandidate]] = field(default_factory=list)
     breadth: int | None = None
@@ -149,6 +150,9 @@ class _Search:
         ]
         ends = [np.stack([rot90(r) @ p.keypoints[-1] for r in range(4)]) for p in self.pieces]
         self.reach = np.array([(_CLOSURE_DIRECTIONS @ e.T).max(axis=1) for e in ends])
+        self.chain_ends = np.array(
+            [[p.rotated[r][0][-1] for r in range(4)] for p in self.pieces]
+        ).reshape(-1, 4, 2)
 
     @cached_property
     def index(self) -> dict[str, int]:
@@ -391,9 +395,9 @@ def _extend(search: _Search, state: _State, j: int, turn: int) -> _State | None:
         features=features,
         mean=state.mean + mean,
         var=state.var + var,
-        walls=np.vstack([state.walls, walls]),
-        vertices=np.vstack([state.vertices, pts]),
-        samples=np.vstack([state.samples, samples]),
+        walls=np.concatenate([state.walls, walls]),
+        vertices=np.concatenate([state.vertices, pts]),
+        samples=np.concatenate([state.samples, samples]),
         box=_union(state.box, box),
         violated=state.violated,
         resolved=state.resolved,
@@ -509,19 +513,20 @@ def _bounds(
     # Cheapest way into each piece left and into the loop's start, from a piece that can
     # still precede it (the current last piece or another one left).
     sources = [state.order[-1], *rest]
-    costs = search.junction[np.ix_(sources, [*rest, 0])]
+    costs = search.junction[sources][:, [*rest, 0]]
     entry = costs.min(axis=0)
     entry_of = dict(zip(rest, entry[:-1].tolist(), strict=True))
     entry_total = float(entry.sum())
 
-    rotation_floor = float(search.rotation_cost[rest].min(axis=1).sum())
+    # Rotation costs are all zero without priors: skip the reduction.
+    rotation_floor = (
+        float(search.rotation_cost[rest].min(axis=1).sum()) if search.frame is not None else 0.0
+    )
     # Closure: the gap the pieces left cannot make up (L1, by duality), against the largest
     # variance the remaining junctions could add (Cauchy-Schwarz: |r|_1^2 <= sum r^2/v sum v).
     js = [j for j, _ in options]
     rotations = [(state.heading + turn - pieces[j].directions[0]) % 4 for j, turn in options]
-    ends = state.end + np.array(
-        [pieces[j].rotated[r][0][-1] for j, r in zip(js, rotations, strict=True)]
-    )
+    ends = state.end + search.chain_ends[js, rotations]
     reach = search.reach[rest].sum(axis=0)
     others = reach[None, :] - search.reach[js]
     gaps = np.maximum(0.0, (-(ends @ _CLOSURE_DIRECTIONS.T) - others).max(axis=1))
@@ -538,13 +543,15 @@ def _bounds(
     spread = junctions_left * noise.straight_sigma**2
     closure += 0.5 * min(np.log(vx + spread) + np.log(vy), np.log(vx) + np.log(vy + spread))
     base = state.energy(weights) + weights[_F["hull"]] * 4 + weights[_F["prior"]] * rotation_floor
+    w_turn, w_closure = weights[_F["turns"]].item(), weights[_F["closure"]].item()
+    into = search.junction[state.order[-1]].tolist()
     out = []
     for (j, turn), gap_cost in zip(options, closure.tolist(), strict=True):
         owed = abs(4 - turning - turn) if search.require_closed else 0
-        bound = base + weights[_F["turns"]] * ((turn != 0) + owed)
-        bound += search.junction[state.order[-1], j] + entry_total - entry_of[j]
+        bound = base + w_turn * ((turn != 0) + owed)
+        bound += into[j] + entry_total - entry_of[j]
         if search.require_closed:
-            bound += weights[_F["closure"]] * gap_cost
+            bound += w_closure * gap_cost
         out.append(bound)
     return out
 
