@@ -47,6 +47,13 @@ class PoseUpdate(_Wire):
     confidence: float = Field(
         0.0, ge=0.0, le=1.0, description="the result's confidence in its main assembly"
     )
+    fragment_confidence: float | None = Field(
+        None,
+        ge=0.0,
+        le=1.0,
+        description="probability that this fragment's own pose is right (the result's "
+        "fragments[].confidence); null when no room closed",
+    )
 
 
 def pose_updates(result: ResultModel) -> list[PoseUpdate]:
@@ -60,7 +67,11 @@ def pose_updates(result: ResultModel) -> list[PoseUpdate]:
         return []
     return [
         PoseUpdate(
-            fragment_id=f.id, pose=f.pose, status=result.status, confidence=result.confidence
+            fragment_id=f.id,
+            pose=f.pose,
+            status=result.status,
+            confidence=result.confidence,
+            fragment_confidence=f.confidence,
         )
         for f in result.fragments
         if f.placed and f.pose is not None

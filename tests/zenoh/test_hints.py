@@ -114,7 +114,7 @@ def test_pose_updates_carry_status_and_confidence(zenoh_service: ZenohService) -
             "status": "ambiguous",
             "confidence": 0.58,
             "fragments": [
-                {"id": "a", "placed": True, "pose": MOVED, "loop_index": 0},
+                {"id": "a", "placed": True, "pose": MOVED, "loop_index": 0, "confidence": 0.97},
                 {"id": "b", "placed": False},
             ],
             "alternatives": [{"probability": 0.4}],
@@ -141,3 +141,4 @@ def test_pose_updates_carry_status_and_confidence(zenoh_service: ZenohService) -
     update = updates[0]
     assert (update.fragment_id, update.status, update.pose) == ("a", "ambiguous", MOVED)
     assert update.confidence == pytest.approx(0.58)
+    assert update.fragment_confidence == pytest.approx(0.97)
