@@ -2,7 +2,7 @@
 
 A frame's local frame is the camera's optical frame: x right, y down, z forward, meters; its
 up axis is about -y. Decoding works on the files' bytes (the zip archive is opened by the
-front ends, :mod:`api.frames` and :mod:`cli.frames`); nothing here reads a file.
+callers, :mod:`services.uploads` and :mod:`cli.frames`); nothing here reads a file.
 """
 
 from __future__ import annotations
