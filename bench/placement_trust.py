@@ -98,19 +98,17 @@ def fragment_checks(result: dict[str, Any], truth: dict[str, Any]) -> list[tuple
     ]
     if not placed:
         return []
-    true = {f["id"]: f for f in truth["fragments"]}
+    true = {f["id"]: np.asarray(f["pose"], dtype=np.float64) for f in truth["fragments"]}
+    refs = {f["id"]: np.asarray(f["centroid_local"]) for f in truth["fragments"]}
     root = min(placed, key=lambda f: f["loop_index"])
-    est_root, true_root = np.asarray(root["pose"]), np.asarray(true[root["id"]]["pose"])
+    # Carry the result's frame onto the truth's through the first fragment alone.
+    through_root = true[root["id"]] @ np.linalg.inv(np.asarray(root["pose"]))
+    estimated = {f["id"]: np.asarray(f["pose"], dtype=np.float64) for f in placed}
+    errors = pose_errors(estimated, true, through_root, float(truth["diagonal"]), refs)
     out = []
     for fragment in placed:
-        truth_f = true[fragment["id"]]
-        estimated = np.linalg.inv(est_root) @ np.asarray(fragment["pose"])
-        expected = np.linalg.inv(true_root) @ np.asarray(truth_f["pose"])
-        turn = (np.linalg.inv(expected) @ estimated)[:3, :3]
-        angle = math.degrees(math.acos(float(np.clip((np.trace(turn) - 1.0) / 2.0, -1.0, 1.0))))
-        centroid = np.append(np.asarray(truth_f["centroid_local"], dtype=np.float64)[:3], 1.0)
-        moved = float(np.linalg.norm((estimated @ centroid - expected @ centroid)[:2]))
-        right = angle < 10.0 and moved < 0.05 * float(truth["diagonal"])
+        error = errors[fragment["id"]]
+        right = error.rotation_deg < 10.0 and error.translation_pct < 5.0
         out.append((float(fragment["confidence"]), right))
     return out
 
@@ -195,6 +193,11 @@ def bucket_table(outcomes: Sequence[Outcome], title: str) -> Table:
     return table
 
 
+def _bin_label(lo: float, hi: float) -> str:
+    """A confidence bin as text: [lo, hi), the last one closed."""
+    return f"[{lo:.2f}, {min(hi, 1.0):.2f}{']' if hi > 1 else ')'}"
+
+
 def reliability_table(outcomes: Sequence[Outcome]) -> Table:
     """Confidence bins against the share of right main results (calibration)."""
     table = Table(
@@ -210,7 +213,7 @@ def reliability_table(outcomes: Sequence[Outcome]) -> Table:
             continue
         closed = sum(o.status == "closed" for o, m in zip(outcomes, inside, strict=True) if m)
         table.add_row(
-            f"[{lo:.2f}, {min(hi, 1.0):.2f}{']' if hi > 1 else ')'}",
+            _bin_label(lo, hi),
             str(int(inside.sum())),
             f"{confidence[inside].mean():.3f}",
             f"{100 * right[inside].mean():.1f}",
@@ -239,7 +242,7 @@ def fragment_reliability_table(outcomes: Sequence[Outcome]) -> Table:
         if not inside.any():
             continue
         table.add_row(
-            f"[{lo:.2f}, {min(hi, 1.0):.2f}{']' if hi > 1 else ')'}",
+            _bin_label(lo, hi),
             str(int(inside.sum())),
             str(int((inside & ambiguous).sum())),
             f"{100 * right[inside].mean():.1f}",
