@@ -17,7 +17,7 @@ from api.errors import (
     check_id,
 )
 from api.hints import load_hints
-from api.store import site_exists
+from api.site_data import site_exists
 from schemas.hints import HintsModel
 from schemas.ids import ID_RULE
 from store.backend import Backend

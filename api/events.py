@@ -14,7 +14,7 @@ from collections.abc import AsyncIterator
 
 import anyio
 
-from api.store import load_result, load_site_status, site_exists
+from api.site_data import load_result, load_site_status, site_exists
 from schemas.service import PlacementStatus, SiteStatus
 from store.backend import Backend
 from store.records import site_event

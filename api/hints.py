@@ -17,7 +17,7 @@ import redis
 from pydantic import ValidationError
 
 from api.errors import InvalidHintsError, InvalidPriorError
-from api.store import touch_site
+from api.site_data import touch_site
 from schemas.hints import FragmentPrior, HintsModel
 from schemas.validation import summarize_errors
 from store.backend import Backend

@@ -19,7 +19,7 @@ import redis
 
 from api.errors import ConflictError, check_id
 from api.metrics import UPLOAD_BYTES, UPLOADS
-from api.store import touch_site
+from api.site_data import touch_site
 from schemas.jobs import FragmentState, LayoutJob, encode_job
 from schemas.service import UploadReply
 from services.errors import FragmentTooLargeError, InvalidFragmentError, JigsawError

@@ -18,7 +18,7 @@ from prometheus_client.core import (
 )
 from prometheus_client.registry import Collector
 
-from api.store import live_workers, queue_counts
+from api.site_data import live_workers, queue_counts
 from store.backend import Backend
 from store.connection import record
 from store.stats import Histogram, JobStats, parse_stats

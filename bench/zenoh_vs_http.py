@@ -36,9 +36,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from api.processes import free_tcp_port  # noqa: E402
-from api.zenoh.config import ZenohOptions, build_config  # noqa: E402
-from api.zenoh.keys import ZenohKeys  # noqa: E402
 from services.point_io import encode_ply  # noqa: E402
+from transport.config import ZenohOptions, build_config  # noqa: E402
+from transport.keys import ZenohKeys  # noqa: E402
 
 
 @contextmanager

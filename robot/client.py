@@ -25,13 +25,13 @@ from typing import Any, TextIO, cast
 
 import zenoh
 
-from api.zenoh.config import Mode, ZenohOptions, build_config
-from api.zenoh.keys import ZenohKeys
 from schemas.hints import FragmentPrior
 from schemas.result import ResultModel
 from schemas.service import ErrorBody, ErrorDetail
 from schemas.zenoh import ServiceInfo, pose_updates
 from services.errors import FragmentTooLargeError
+from transport.config import Mode, ZenohOptions, build_config
+from transport.keys import ZenohKeys
 
 __all__ = ["RobotOptions", "robot_options", "send_fragments", "watch_poses"]
 

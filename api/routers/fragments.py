@@ -9,7 +9,7 @@ from api.body import openapi_body, read_limited
 from api.deps import BackendDep, ExistingSite, FragmentId, SiteId
 from api.errors import error_responses
 from api.ingest import ingest_fragment
-from api.store import delete_fragment, load_fragment
+from api.site_data import delete_fragment, load_fragment
 from schemas.service import FragmentStatus, UploadReply
 
 __all__ = ["router"]

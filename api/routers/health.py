@@ -6,7 +6,7 @@ from fastapi import APIRouter
 
 from api.deps import BackendDep
 from api.errors import UnavailableError, error_responses
-from api.store import live_workers
+from api.site_data import live_workers
 from schemas.service import HealthReply, ReadyReply
 
 __all__ = ["router"]

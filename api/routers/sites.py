@@ -12,7 +12,7 @@ from fastapi.responses import JSONResponse
 from api.deps import BackendDep, ExistingSite
 from api.errors import LayoutNotFoundError, error_responses
 from api.floorplan_svg import render_floorplan_svg
-from api.store import delete_site, list_sites, load_result, load_site_status
+from api.site_data import delete_site, list_sites, load_result, load_site_status
 from schemas.result import ResultModel
 from schemas.service import PendingReply, SiteList, SiteStatus
 

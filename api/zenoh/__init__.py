@@ -3,7 +3,7 @@
 Importing this package does not import zenoh; :func:`zenoh_front_end` does, and only when
 ``FPJ_ZENOH_LISTEN`` is not ``none``.
 
-Key expressions (prefix ``fpj``, ``FPJ_ZENOH_PREFIX``) are listed in :mod:`api.zenoh.keys`.
+Key expressions (prefix ``fpj``, ``FPJ_ZENOH_PREFIX``) are listed in :mod:`transport.keys`.
 Robots:
 
 - send a fragment with a query on ``fpj/sites/{site}/fragments/{fragment}`` whose payload is

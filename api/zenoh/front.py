@@ -27,11 +27,9 @@ from typing import Any
 import zenoh
 
 from api.errors import SiteNotFoundError, check_id
-from api.store import load_result, site_exists
+from api.site_data import load_result, site_exists
 from api.zenoh.bridge import LoopBridge, error_of, reply_error, reply_json
-from api.zenoh.config import build_config, service_options
 from api.zenoh.ingest import attachment_prior, check_token, ingest_with_sender, parse_tag
-from api.zenoh.keys import ZenohKeys
 from api.zenoh.publisher import ResultPublisher
 from api.zenoh.robots import RobotTracker
 from api.zenoh.ros_bridge import RosBridge
@@ -40,6 +38,8 @@ from schemas.zenoh import RobotTag, SenderRecord, ServiceInfo
 from services.errors import JigsawError
 from store.backend import Backend
 from store.connection import strings
+from transport.config import build_config, service_options
+from transport.keys import ZenohKeys
 
 __all__ = ["Request", "ResultPendingError", "ZenohFront"]
 

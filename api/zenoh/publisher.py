@@ -21,12 +21,12 @@ import logging
 import zenoh
 from pydantic import ValidationError
 
-from api.zenoh.keys import ZenohKeys
 from api.zenoh.ros_bridge import RosBridge
 from schemas.result import ResultModel
 from schemas.zenoh import pose_updates
 from store.backend import Backend
 from store.connection import REDIS_DOWN
+from transport.keys import ZenohKeys
 
 __all__ = ["ResultPublisher"]
 

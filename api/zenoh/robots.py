@@ -19,10 +19,10 @@ from typing import Any
 import zenoh
 
 from api.zenoh.bridge import LoopBridge
-from api.zenoh.keys import ZenohKeys
 from store.backend import Backend
 from store.connection import REDIS_DOWN
 from store.presence import clear_presence, write_presence
+from transport.keys import ZenohKeys
 
 __all__ = ["RobotTracker"]
 

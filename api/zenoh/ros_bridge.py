@@ -53,7 +53,7 @@ import numpy as np
 import zenoh
 
 from api.metrics import ROS_DEPTH_IMAGES
-from api.store import load_site_status
+from api.site_data import load_site_status
 from api.zenoh.bridge import LoopBridge, error_of
 from api.zenoh.ingest import ingest_with_sender
 from api.zenoh.ros2 import (

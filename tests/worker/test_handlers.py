@@ -14,7 +14,7 @@ import redis
 
 from api.hints import replace_hints
 from api.ingest import ingest_fragment
-from api.store import delete_fragment, delete_site
+from api.site_data import delete_fragment, delete_site
 from schemas.hints import HintsModel
 from schemas.jobs import LayoutJob, PlacementJob, decode_job
 from schemas.result import AlternativeModel, ResultModel

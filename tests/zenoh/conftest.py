@@ -23,8 +23,6 @@ import pytest
 import redis
 import zenoh
 
-from api.zenoh.config import ZenohOptions, build_config
-from api.zenoh.keys import ZenohKeys
 from schemas.settings import Settings
 from tests.service_fixtures import (  # noqa: F401
     ROOT,
@@ -34,6 +32,8 @@ from tests.service_fixtures import (  # noqa: F401
     settings_env,
     wait_until,
 )
+from transport.config import ZenohOptions, build_config
+from transport.keys import ZenohKeys
 
 MAX_UPLOAD = 2_000_000
 ROS_CLOUD_TOPIC = "/robot1/fragments"

@@ -1,4 +1,5 @@
-"""What the API reads from Redis (site status, results, lists), and the deletes."""
+"""The API's own use of the data layer (:mod:`store`): what it reads from Redis (site status,
+results, lists, queue counts) as wire models, and the deletes."""
 
 from __future__ import annotations
 
