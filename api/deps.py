@@ -3,26 +3,22 @@ hints)."""
 
 from __future__ import annotations
 
-import hmac
 from typing import Annotated, cast
 
 from fastapi import Depends, Path, Query, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
-from api.errors import (
-    ForbiddenError,
-    HintsNotFoundError,
-    SiteNotFoundError,
-    UnauthorizedError,
-    check_id,
-)
+from api.auth import authorize
+from api.errors import HintsNotFoundError, SiteNotFoundError, check_id
 from api.hints import load_hints
 from api.site_data import site_exists
+from schemas.access import Right, Scope
 from schemas.hints import HintsModel
 from schemas.ids import ID_RULE
 from store.backend import Backend
 
 __all__ = [
+    "Access",
     "BackendDep",
     "ExistingSite",
     "FragmentId",
@@ -74,28 +70,42 @@ async def _site_hints(site_id: ExistingSite, backend: BackendDep) -> HintsModel:
 
 SiteHints = Annotated[HintsModel, Depends(_site_hints)]
 
-_bearer = HTTPBearer(auto_error=False, description="one of the tokens of FPJ_TOKENS")
+_bearer = HTTPBearer(auto_error=False, description="a token of FPJ_TOKENS")
+
+# The right a request needs follows from its method: every GET only reads, every PUT stores
+# (fragments, hints), every DELETE removes; a method not listed needs the strongest right.
+_RIGHT_OF_METHOD: dict[str, Right] = {"GET": "read", "HEAD": "read", "PUT": "upload"}
+
+# Site-less routes that answer only with what the token's sites hold (the site list): a
+# token with the right on any one site may call them. Every other site-less route (metrics)
+# needs the right on every site.
+_FILTERED_PATHS = frozenset({"/v1/sites"})
 
 
-def _check_token(tokens: list[str], given: str | None) -> None:
-    if not tokens:
-        return
-    if given is None:
-        raise UnauthorizedError("a bearer token is required (Authorization: Bearer <token>)")
-    if not any(hmac.compare_digest(given.encode(), token.encode()) for token in tokens):
-        raise ForbiddenError("unknown bearer token")
+def _authorize(request: Request, given: str | None, how: str) -> Scope:
+    settings = get_backend(request).settings
+    right = _RIGHT_OF_METHOD.get(request.method, "delete")
+    route = getattr(request.scope.get("route"), "path", None)
+    site_id = request.path_params.get("site_id")
+    anywhere = site_id is None and route in _FILTERED_PATHS
+    return authorize(settings.tokens, given, right, site_id, how, anywhere=anywhere)
 
 
 async def require_token(
-    backend: BackendDep,
+    request: Request,
     credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
-) -> None:
-    """With tokens configured: 401 without a bearer token, 403 with an unknown one."""
-    _check_token(backend.settings.tokens, credentials.credentials if credentials else None)
+) -> Scope:
+    """With tokens configured: 401 without a bearer token, 403 with an unknown one or one
+    without the request's right (GET read, PUT upload, DELETE delete) on the path's site."""
+    given = credentials.credentials if credentials else None
+    return _authorize(request, given, "Authorization: Bearer <token>")
+
+
+Access = Annotated[Scope, Depends(require_token)]
 
 
 async def require_stream_token(
-    backend: BackendDep,
+    request: Request,
     credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
     access_token: Annotated[
         str | None,
@@ -104,7 +114,7 @@ async def require_stream_token(
             "EventSource); only read when FPJ_TOKENS is set and no Authorization header is sent"
         ),
     ] = None,
-) -> None:
+) -> Scope:
     """:func:`require_token` that also takes ``?access_token=`` (the event stream only)."""
     given = credentials.credentials if credentials else access_token
-    _check_token(backend.settings.tokens, given)
+    return _authorize(request, given, "Authorization: Bearer <token> or ?access_token=")

@@ -32,6 +32,7 @@ __all__ = [
     "FragmentNotFoundError",
     "HintsNotFoundError",
     "HintsTooLargeError",
+    "InsufficientScopeError",
     "InvalidHintsError",
     "InvalidIdError",
     "InvalidPriorError",
@@ -110,7 +111,15 @@ class UnauthorizedError(ServiceError):
 
 
 class ForbiddenError(ServiceError):
+    """An unknown token."""
+
     code = "forbidden"
+
+
+class InsufficientScopeError(ForbiddenError):
+    """A known token without the right asked for on this site (schemas.access)."""
+
+    code = "insufficient_scope"
 
 
 class UnavailableError(ServiceError):
@@ -138,7 +147,8 @@ _STATUS: dict[type[JigsawError], int] = {
 _DESCRIPTIONS = {
     400: f"invalid id ({ID_RULE})",
     401: "missing bearer token",
-    403: "unknown bearer token",
+    403: "unknown bearer token (forbidden), or one without this right on this site "
+    "(insufficient_scope)",
     404: "unknown site or fragment, no hints stored, or nothing placed to export",
     409: "different bytes already stored under this fragment id",
     413: "body too large (bytes or points; an archive with too many or too large entries)",

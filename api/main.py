@@ -26,8 +26,10 @@ runners-up (contract v2, sections 2 to 4).
 
 Every error answers `{"error": {"code": ..., "message": ...}}`. With `FPJ_TOKENS` set, every
 route but `/healthz`, `/readyz` and the web pages needs `Authorization: Bearer <token>` (the
-event stream also takes `?access_token=<token>`, for browsers' EventSource). A web view of the
-sites is at `/`.
+event stream also takes `?access_token=<token>`, for browsers' EventSource), and the token's
+right on the route's site: `read` for GET, `upload` for PUT, `delete` for DELETE (`/metrics`:
+`read` on every site; the site list shows the token's sites). A web view of the sites is at
+`/`.
 """
 
 

@@ -75,12 +75,30 @@ async def load_result(backend: Backend, site_id: str) -> str | None:
     return str(value) if value is not None else None
 
 
-async def list_sites(backend: Backend, offset: int, limit: int) -> SiteList:
-    """Sites in creation order, with their fragment counts and placement state."""
+async def _site_page(
+    backend: Backend, offset: int, limit: int, only: tuple[str, ...] | None
+) -> tuple[list[str], int]:
+    """One page of site ids in creation order, and how many there are in all."""
     keys, r = backend.keys, backend.redis
+    if only is not None:  # a token's few sites: those that exist, in creation order
+        scores = await r.zmscore(keys.sites, list(only)) if only else []
+        found = sorted(
+            (float(s), sid) for sid, s in zip(only, scores, strict=True) if s is not None
+        )
+        return [sid for _, sid in found[offset : offset + limit]], len(found)
     total = int(await r.zcard(keys.sites))
     # Past the end the page is empty (an offset beyond Redis' 64-bit range is an error there).
     ids = strings(await r.zrange(keys.sites, offset, offset + limit - 1)) if offset < total else []
+    return ids, total
+
+
+async def list_sites(
+    backend: Backend, offset: int, limit: int, only: tuple[str, ...] | None = None
+) -> SiteList:
+    """Sites in creation order, with their fragment counts and placement state; ``only``:
+    just these sites (what a site-scoped token may see)."""
+    keys, r = backend.keys, backend.redis
+    ids, total = await _site_page(backend, offset, limit, only)
     async with r.pipeline(transaction=False) as pipe:
         for sid in ids:
             pipe.hgetall(keys.site(sid))

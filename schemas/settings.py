@@ -7,7 +7,6 @@ the cached :func:`get_settings`, never a module-level instance.
 
 from __future__ import annotations
 
-import json
 import os
 import re
 from functools import lru_cache
@@ -17,6 +16,7 @@ from typing import Annotated, Literal, NamedTuple
 from pydantic import Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
+from schemas.access import Scope, parse_scopes
 from schemas.ids import is_valid_id
 from schemas.params import ParserLimits, PipelineParams
 
@@ -80,9 +80,12 @@ class Settings(BaseSettings):
     compress_level: int = Field(
         1, ge=0, le=9, description="zlib level of stored fragments (0: stored uncompressed)"
     )
-    tokens: Annotated[list[str], NoDecode] = Field(
-        default_factory=list,
-        description="bearer tokens (comma-separated or a JSON list); empty: no auth",
+    tokens: Annotated[dict[str, Scope], NoDecode] = Field(
+        default_factory=dict,
+        description="bearer tokens and what each may do: comma-separated TOKEN[:SITES[:RIGHTS]] "
+        "(SITES and RIGHTS +-separated or *, rights read, upload, delete; a bare token: every "
+        "right on every site), a JSON list of those, or a JSON object {TOKEN: {sites, "
+        "rights}}; empty: no auth",
     )
 
     # Workers and queue.
@@ -183,13 +186,8 @@ class Settings(BaseSettings):
 
     @field_validator("tokens", mode="before")
     @classmethod
-    def _split_tokens(cls, value: object) -> object:
-        if isinstance(value, str):
-            text = value.strip()
-            if text.startswith("["):
-                return json.loads(text)
-            return [part.strip() for part in text.split(",") if part.strip()]
-        return value
+    def _parse_tokens(cls, value: object) -> object:
+        return parse_scopes(value)
 
     @field_validator("zenoh_listen", "zenoh_connect")
     @classmethod

@@ -9,7 +9,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Query, Response
 from fastapi.responses import JSONResponse
 
-from api.deps import BackendDep, ExistingSite
+from api.deps import Access, BackendDep, ExistingSite
 from api.errors import LayoutNotFoundError, error_responses
 from api.floorplan_svg import render_floorplan_svg
 from api.site_data import delete_site, list_sites, load_result, load_site_status
@@ -32,10 +32,13 @@ def _pending(site_id: str) -> JSONResponse:
 @router.get("", summary="List sites", responses=error_responses(401, 403, 503))
 async def get_sites(
     backend: BackendDep,
+    access: Access,
     offset: Annotated[int, Query(ge=0)] = 0,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
 ) -> SiteList:
-    return await list_sites(backend, offset, limit)
+    """The sites the token may read (all of them without tokens or with a ``*`` token)."""
+    only = None if access.all_sites else access.sites
+    return await list_sites(backend, offset, limit, only)
 
 
 @router.get(

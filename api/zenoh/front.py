@@ -26,13 +26,15 @@ from typing import Any
 
 import zenoh
 
+from api.auth import authorize
 from api.errors import SiteNotFoundError, check_id
 from api.site_data import load_result, site_exists
 from api.zenoh.bridge import LoopBridge, error_of, reply_error, reply_json
-from api.zenoh.ingest import attachment_prior, check_token, ingest_with_sender, parse_tag
+from api.zenoh.ingest import attachment_prior, ingest_with_sender, parse_tag
 from api.zenoh.publisher import ResultPublisher
 from api.zenoh.robots import RobotTracker
 from api.zenoh.ros_bridge import RosBridge
+from schemas.access import Right, Scope
 from schemas.service import UploadReply
 from schemas.zenoh import RobotTag, SenderRecord, ServiceInfo
 from services.errors import JigsawError
@@ -185,9 +187,18 @@ class ZenohFront:
         )
         return [(request.key, reply.model_dump_json())]
 
+    def _authorize(self, tag: RobotTag, right: Right, site_id: str) -> Scope:
+        """As over HTTP; a wildcard site (a result query on ``fpj/sites/*/result``) needs the
+        right on one site and gets the results of the token's sites only."""
+        how = 'attachment {"token": "..."} or ?token='
+        anywhere = "*" in site_id
+        site = None if anywhere else site_id
+        return authorize(self.settings.tokens, tag.token, right, site, how, anywhere=anywhere)
+
     async def _result_query(self, request: Request) -> list[tuple[str, str]]:
-        check_token(self.settings.tokens, request.tag())
-        return [(self.keys.result(site), body) for site, body in await self._results(request.key)]
+        scope = self._authorize(request.tag(), "read", self.keys.parse_result(request.key) or "")
+        found = await self._results(request.key)
+        return [(self.keys.result(site), body) for site, body in found if scope.covers(site)]
 
     # ------------------------------------------------------------ puts
 
@@ -220,9 +231,9 @@ class ZenohFront:
     ) -> UploadReply:
         """Tag and token first, then the prior (refused before anything is stored)."""
         tag = parse_tag(attachment, parameters)
-        check_token(self.settings.tokens, tag)
-        prior = attachment_prior(attachment)
         site_id, fragment_id = self.keys.parse_fragment(key) or ("", "")
+        self._authorize(tag, "upload", site_id)
+        prior = attachment_prior(attachment)
         sender = SenderRecord(robot_id=tag.robot_id) if tag.robot_id else None
         return await ingest_with_sender(self.backend, site_id, fragment_id, data, sender, prior)
 

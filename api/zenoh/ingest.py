@@ -5,8 +5,9 @@ A query or put may carry an attachment, UTF-8 JSON of one object:
 
 - ``robot_id`` and ``token`` (:class:`schemas.zenoh.RobotTag`): who sends it, and a bearer
   token; a query may give these as selector parameters ``?robot_id=r1`` instead (the
-  attachment wins). With ``FPJ_TOKENS`` set, a missing token is ``unauthorized`` and an
-  unknown one ``forbidden``, as over HTTP;
+  attachment wins). With ``FPJ_TOKENS`` set, a missing token is ``unauthorized``, an
+  unknown one ``forbidden`` and one without the ``upload`` right on the key's site
+  ``insufficient_scope``, as over HTTP (:func:`api.auth.authorize`);
 - ``prior``: ``{"pose", "sigma_xy", "sigma_yaw_deg"}``, the fragment's entry of the site's
   hints (contract section 5). An invalid prior is refused (``invalid_prior``) before anything
   is stored; a valid one is merged into the hints once the fragment is accepted, and the site
@@ -15,13 +16,11 @@ A query or put may carry an attachment, UTF-8 JSON of one object:
 
 from __future__ import annotations
 
-import hmac
 import json
 from typing import Any
 
 from pydantic import ValidationError
 
-from api.errors import ForbiddenError, UnauthorizedError
 from api.hints import merge_prior, parse_prior
 from api.ingest import ingest_fragment
 from schemas.hints import FragmentPrior
@@ -35,7 +34,6 @@ from store.presence import record_sender
 __all__ = [
     "InvalidRequestError",
     "attachment_prior",
-    "check_token",
     "ingest_with_sender",
     "parse_tag",
 ]
@@ -87,17 +85,6 @@ def attachment_prior(attachment: bytes | None) -> FragmentPrior | None:
     """
     value = _attachment_object(attachment).get("prior")
     return None if value is None else parse_prior(value)
-
-
-def check_token(tokens: list[str], tag: RobotTag) -> None:
-    """With tokens configured, require one of them (constant-time comparison)."""
-    if not tokens:
-        return
-    if not tag.token:
-        raise UnauthorizedError('a token is required (attachment {"token": "..."})')
-    given = tag.token.encode()
-    if not any(hmac.compare_digest(given, token.encode()) for token in tokens):
-        raise ForbiddenError("unknown token")
 
 
 async def ingest_with_sender(

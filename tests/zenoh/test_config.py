@@ -7,8 +7,9 @@ from typing import Any
 import pytest
 from pydantic import ValidationError
 
-from api.errors import ForbiddenError, UnauthorizedError
-from api.zenoh.ingest import InvalidRequestError, check_token, parse_tag
+from api.auth import authorize
+from api.errors import ForbiddenError, InsufficientScopeError, UnauthorizedError
+from api.zenoh.ingest import InvalidRequestError, parse_tag
 from schemas.settings import Settings
 
 pytestmark = pytest.mark.timeout(10)
@@ -38,9 +39,18 @@ def test_robot_tags_and_tokens() -> None:
     for bad in (b"\xff", b"[]", b'{"robot_id": ""}'):
         with pytest.raises(InvalidRequestError):
             parse_tag(bad)
-    check_token([], parse_tag(None))  # no tokens configured: anyone
+
+    def allow(tokens: object, tag: bytes | None, site: str = "lab") -> None:
+        authorize(Settings(tokens=tokens).tokens, parse_tag(tag).token, "upload", site)
+
+    allow("", None)  # no tokens configured: anyone
     with pytest.raises(UnauthorizedError):
-        check_token(["secret"], parse_tag(None))
+        allow("secret", None)
     with pytest.raises(ForbiddenError):
-        check_token(["secret"], parse_tag(b'{"token": "guess"}'))
-    check_token(["other", "secret"], parse_tag(None, {"token": "secret"}))
+        allow("secret", b'{"token": "guess"}')
+    allow("other,secret", b'{"token": "secret"}')
+    allow("r1:lab:upload", b'{"token": "r1"}')
+    with pytest.raises(InsufficientScopeError):
+        allow("r1:lab:upload", b'{"token": "r1"}', site="hall")
+    with pytest.raises(InsufficientScopeError):
+        allow("r1:lab:read", b'{"token": "r1"}')
