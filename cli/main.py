@@ -155,17 +155,17 @@ def serve(
     host: Annotated[
         str,
         typer.Option(
-            help="bind address; the default, every interface, matches zenoh's default "
-            "FPJ_ZENOH_LISTEN=tcp/0.0.0.0:7447 (robots reach both); 127.0.0.1 keeps HTTP "
-            "on this machine"
+            help="bind address; the default keeps HTTP on this machine until asked to open "
+            "up: 0.0.0.0 (every interface) for robots on the network, with FPJ_TOKENS set"
         ),
-    ] = "0.0.0.0",
+    ] = "127.0.0.1",
     port: Annotated[int, typer.Option(help="TCP port")] = 8000,
 ) -> None:
     """Run the HTTP service (embedded Redis and local workers unless FPJ_REDIS_URL is set).
 
-    Web view at http://HOST:PORT/, API docs at /docs. Set FPJ_TOKENS when the network is not
-    trusted: every route but /healthz, /readyz and the web pages then needs a token.
+    Web view at http://HOST:PORT/, API docs at /docs. Set FPJ_TOKENS before opening up:
+    every route but /healthz, /readyz and the web pages then needs a token with the right
+    (read, upload, delete) on the route's site.
     """
     from api.server import run_server
 
