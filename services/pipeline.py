@@ -118,12 +118,16 @@ def _concrete(
     cand: PlacementCandidate,
     translations: FloatArray,
     params: PipelineParams,
+    measured: Mapping[tuple[str, str], float],
     assembly: Assembly | None = None,
 ) -> _Placed:
-    """Refine an assembly's translations and build its poses and floorplan."""
+    """Refine an assembly's translations and build its poses and floorplan (``measured``:
+    the overlaps the placement measured, ``Placement.measured``)."""
     ordered = [pieces[fid] for fid in cand.order]
     if cand.missing == 0:
-        refined = refine_translations(ordered, cand.rotations, translations, params.placement)
+        refined = refine_translations(
+            ordered, cand.rotations, translations, params.placement, measured
+        )
     else:
         # An open chain is already joined end to end; there is no loop to refine.
         refined = Refinement(translations, "skipped: open chain", 0.0, 0.0)
@@ -266,10 +270,12 @@ def _choose(
         rank_assemblies(piece_list, placement, params.placement, known) if placement.closed else []
     )
     if not assemblies:
-        main = _concrete(layouts, pieces, placement.best, placement.translations, params)
+        main = _concrete(
+            layouts, pieces, placement.best, placement.translations, params, placement.measured
+        )
         return main, [], []
     concrete = [
-        _concrete(layouts, pieces, a.candidate, a.translations, params, a)
+        _concrete(layouts, pieces, a.candidate, a.translations, params, placement.measured, a)
         for a in assemblies[: params.placement.max_alternatives + 1]
     ]
     closing = [c for c in concrete if c.polygon is not None]

@@ -20,7 +20,7 @@ infeasible or unsolved problem returns a meaningless x.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -168,10 +168,15 @@ def _solve(problem: _Problem, keep: NDArray[np.bool_]) -> tuple[str, FloatArray 
     return status, np.asarray(result.x, dtype=np.float64)
 
 
-def measured_shifts(pieces: Sequence[Piece], rotations: Sequence[int]) -> list[float | None]:
+def measured_shifts(
+    pieces: Sequence[Piece],
+    rotations: Sequence[int],
+    measured: Mapping[tuple[str, str], float] | None = None,
+) -> list[float | None]:
     """The overlap (negative) or gap along the wall at each straight junction of the loop
     (piece i to piece i + 1, the last to the first) where the two ends' structure pins it
-    down; None elsewhere."""
+    down; None elsewhere. ``measured``: the placement's measurements by ordered pair of ids
+    (``Placement.measured``); without it the ends are registered here."""
     n = len(pieces)
     out: list[float | None] = []
     for i in range(n):
@@ -179,10 +184,13 @@ def measured_shifts(pieces: Sequence[Piece], rotations: Sequence[int]) -> list[f
         straight = (a.directions[-1] + rotations[i]) % 4 == (
             b.directions[0] + rotations[(i + 1) % n]
         ) % 4
-        match = (
-            register_ends(end_voxels(a, "target"), end_voxels(b, "source")) if straight else None
-        )
-        out.append(None if match is None else match.measured_shift)
+        if not straight:
+            out.append(None)
+        elif measured is not None:
+            out.append(measured.get((a.id, b.id)))
+        else:
+            match = register_ends(end_voxels(a, "target"), end_voxels(b, "source"))
+            out.append(match.measured_shift)
     return out
 
 
@@ -191,6 +199,7 @@ def refine_translations(
     rotations: Sequence[int],
     translations: FloatArray,
     params: PlacementParams = PlacementParams(),
+    measured: Mapping[tuple[str, str], float] | None = None,
 ) -> Refinement:
     """Refine the placement's translations with the constrained QP.
 
@@ -204,6 +213,7 @@ def refine_translations(
     rotations : quarter turns per piece, loop order.
     translations : (n, 2) site position of each piece's source from the placement.
     params : the junction displacement model.
+    measured : the overlaps the placement measured (``Placement.measured``); None: measure.
     """
     n = len(pieces)
     if n < 2:
@@ -213,7 +223,7 @@ def refine_translations(
         for p, r, t in zip(pieces, rotations, translations, strict=True)
     ]
     noise = JunctionNoise.from_params(params)
-    shifts = measured_shifts(pieces, rotations)
+    shifts = measured_shifts(pieces, rotations, measured)
     refined = _refine(sites, pieces, rotations, translations, noise, shifts)
     missed = _missed_shifts(sites, refined.translations - translations, shifts)
     if any(missed):

@@ -92,6 +92,9 @@ class Placement:
     closed: True when the pieces form one simple counter-clockwise loop (turns add up to a
     full turn); the gap left at its end is closed by the refinement.
     exhaustive: the search finished within its node budget (the best is optimal).
+    measured: overlap (negative) or gap along the wall, m, of each ordered pair of pieces
+    (a's target, b's source, by id) whose ends' structure pins it down; the refinement takes
+    it from here instead of registering the ends again.
     """
 
     best: PlacementCandidate
@@ -100,6 +103,7 @@ class Placement:
     nodes_searched: int
     exhaustive: bool
     closed: bool
+    measured: Mapping[tuple[str, str], float] = field(default_factory=dict)
 
     @property
     def candidates(self) -> tuple[PlacementCandidate, ...]:
@@ -118,6 +122,7 @@ class _Search:
     weights: FloatArray = field(init=False)
     noise: JunctionNoise = field(init=False)
     structure: FloatArray = field(init=False)  # [a, b]: structure score of b after a
+    measured: dict[tuple[str, str], float] = field(init=False)  # see Placement.measured
     boundary: FloatArray = field(init=False)  # [a, b]: boundary mismatch of b after a
     junction: FloatArray = field(init=False)  # [a, b]: weighted cost of the two
     frame: FrameEstimate | None = field(init=False)  # the hints frame's yaw, from priors
@@ -136,7 +141,7 @@ class _Search:
         n = len(self.pieces)
         self.weights = feature_weights(self.params)
         self.noise = JunctionNoise.from_params(self.params)
-        self.structure, self.boundary = _pair_evidence(self.pieces, self.params)
+        self.structure, self.boundary, self.measured = _pair_evidence(self.pieces, self.params)
         cost = self.weights[_F["structure"]] * self.structure
         cost = cost + self.weights[_F["boundary"]] * self.boundary
         if n > 1:
@@ -194,19 +199,24 @@ class _Search:
 
 def _pair_evidence(
     pieces: Sequence[Piece], params: PlacementParams
-) -> tuple[FloatArray, FloatArray]:
-    """Structure scores and boundary mismatches of every ordered pair [a, b] (b after a)."""
+) -> tuple[FloatArray, FloatArray, dict[tuple[str, str], float]]:
+    """Structure scores and boundary mismatches of every ordered pair [a, b] (b after a),
+    and the overlaps their ends' structure measures."""
     n = len(pieces)
     targets = [end_voxels(p, "target") for p in pieces]
     sources = [end_voxels(p, "source") for p in pieces]
     structure, boundary = np.zeros((n, n)), np.zeros((n, n))
+    measured: dict[tuple[str, str], float] = {}
     for a, b in itertools.product(range(n), repeat=2):
         if a != b or n == 1:
+            match = register_ends(targets[a], sources[b])
             # Coinciding structure is strong evidence for a junction; structure without
             # a counterpart is weak evidence against it (occlusion, clutter that moved).
-            structure[a, b] = min(0.0, register_ends(targets[a], sources[b]).score)
+            structure[a, b] = min(0.0, match.score)
             boundary[a, b] = boundary_mismatch(pieces[a], pieces[b], params)
-    return structure, boundary
+            if match.measured_shift is not None:
+                measured[pieces[a].id, pieces[b].id] = match.measured_shift
+    return structure, boundary, measured
 
 
 def _rotation_costs(
@@ -647,6 +657,7 @@ def place_pieces(
         nodes_searched=nodes,
         exhaustive=not search.truncated,
         closed=search.require_closed,
+        measured=search.measured,
     )
 
 

@@ -77,3 +77,23 @@ def test_an_overlap_the_structure_measures_takes_the_loop_gap(with_structure, ov
     sites = _sites(pieces, [0, 0], refined.translations)
     bottom = sites[0][0][0] - sites[1][-1][0]  # p0's source past p1's target, along +x
     assert bottom == pytest.approx(overlap, abs=0.05)
+
+
+def test_the_placements_measurements_are_the_ones_the_refinement_takes():
+    # The search registers every pair's ends once; the refinement reuses what it measured
+    # instead of registering again, with the same result.
+    pieces = overlapping_halves(True)
+    placement = place_pieces(pieces)
+    assert placement is not None
+    order = {p.id: p for p in pieces}
+    ordered = [order[fid] for fid in placement.best.order]
+    rotations = placement.best.rotations
+    assert placement.measured  # the structured bottom cut measures
+    reused = measured_shifts(ordered, rotations, placement.measured)
+    assert reused == measured_shifts(ordered, rotations)
+    assert any(shift is not None for shift in reused)
+    again = refine_translations(ordered, rotations, placement.translations)
+    taken = refine_translations(
+        ordered, rotations, placement.translations, measured=placement.measured
+    )
+    assert np.array_equal(again.translations, taken.translations)
