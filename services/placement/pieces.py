@@ -64,13 +64,10 @@ def walls_of(points: FloatArray) -> FloatArray:
 
 def shift_walls(walls: FloatArray, shift: FloatArray) -> FloatArray:
     """Walls (axis, offset, lo, hi) translated by ``shift`` (2,)."""
-    along_x = walls[:, 0] == 0.0
-    out = walls.copy()
-    out[:, 1] += np.where(along_x, shift[1], shift[0])
-    run = np.where(along_x, shift[0], shift[1])
-    out[:, 2] += run
-    out[:, 3] += run
-    return out
+    sx, sy = float(shift[0]), float(shift[1])
+    # Row by axis: a wall along x moves its offset by y and its run by x; along y, reversed.
+    by_axis = np.array([[0.0, sy, sx, sx], [0.0, sx, sy, sy]])
+    return walls + by_axis[walls[:, 0].astype(np.intp)]
 
 
 def wall_samples(points: FloatArray, spacing: float = SAMPLE_SPACING) -> FloatArray:

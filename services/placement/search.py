@@ -525,7 +525,8 @@ def _bounds(
     sources = [state.order[-1], *rest]
     costs = search.junction[sources][:, [*rest, 0]]
     entry = costs.min(axis=0)
-    entry_of = dict(zip(rest, entry[:-1].tolist(), strict=True))
+    entry_of = np.zeros(len(pieces))
+    entry_of[rest] = entry[:-1]
     entry_total = float(entry.sum())
 
     # Rotation costs are all zero without priors: skip the reduction.
@@ -553,16 +554,16 @@ def _bounds(
     spread = junctions_left * noise.straight_sigma**2
     closure += 0.5 * min(np.log(vx + spread) + np.log(vy), np.log(vx) + np.log(vy + spread))
     base = state.energy(weights) + weights[_F["hull"]] * 4 + weights[_F["prior"]] * rotation_floor
-    w_turn, w_closure = weights[_F["turns"]].item(), weights[_F["closure"]].item()
-    into = search.junction[state.order[-1]].tolist()
-    out = []
-    for (j, turn), gap_cost in zip(options, closure.tolist(), strict=True):
-        owed = abs(4 - turning - turn) if search.require_closed else 0
-        bound = base + w_turn * ((turn != 0) + owed)
-        bound += into[j] + entry_total - entry_of[j]
-        if search.require_closed:
-            bound += w_closure * gap_cost
-        out.append(bound)
+    turns = np.array([turn for _, turn in options])
+    turn_cost = (turns != 0).astype(np.float64)
+    if search.require_closed:
+        turn_cost += np.abs(4 - turning - turns)  # turns still owed
+    # The junction into j replaces the cheapest way into j counted in entry_total.
+    bounds = base + weights[_F["turns"]] * turn_cost
+    bounds += search.junction[state.order[-1], js] + entry_total - entry_of[js]
+    if search.require_closed:
+        bounds += weights[_F["closure"]] * closure
+    out: list[float] = bounds.tolist()
     return out
 
 
