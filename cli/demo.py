@@ -53,17 +53,17 @@ def _num(value: float | None, digits: int = 2) -> str:
 def _write_outputs(out: Path, clouds: dict[str, FloatArray], run: AlignRun) -> list[Path]:
     """result.json, per-fragment layout pictures, floorplan pictures, glTF model."""
     written = [out / "result.json"]
-    written[0].write_text(json.dumps(run.result.model_dump(mode="json"), indent=2) + "\n")
-    for index, (fid, layout) in enumerate(run.layouts.items()):
+    written[0].write_text(json.dumps(run.alignment.result.model_dump(mode="json"), indent=2) + "\n")
+    for index, (fid, layout) in enumerate(run.alignment.layouts.items()):
         canvas = layout_canvas(clouds[fid], layout, index)
         for suffix in (".png", ".svg"):
             save_picture(canvas, out / "layouts" / f"{fid}{suffix}")
     written.append(out / "layouts")
-    plan = floorplan_canvas(clouds, run.result)
+    plan = floorplan_canvas(clouds, run.alignment.result)
     for suffix in (".png", ".svg"):
         save_picture(plan, out / f"floorplan{suffix}")
         written.append(out / f"floorplan{suffix}")
-    mesh = layout_model(run.result)
+    mesh = layout_model(run.alignment.result)
     if mesh is not None and len(mesh.triangles):
         write_model(mesh, out / "model.gltf")
         written.append(out / "model.gltf")
@@ -158,7 +158,7 @@ def _demo(out: Path, seed: int, console: Console) -> int:
     seconds |= {f"{stage} (pipeline)": value for stage, value in run.seconds.items()}
     with _timed(seconds, "exports"):
         written = _write_outputs(out, clouds, run)
-    result, truth = run.result.model_dump(mode="json"), read_truth(out / "scene")
+    result, truth = run.alignment.result.model_dump(mode="json"), read_truth(out / "scene")
     report = evaluate_result(result, truth)
     n_points = {fid: len(points) for fid, points in clouds.items()}
     console.print(_fragment_table(result, truth, report, n_points))

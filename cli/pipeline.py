@@ -14,7 +14,6 @@ from pathlib import Path
 from time import perf_counter
 from typing import Any
 
-import numpy as np
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -24,13 +23,12 @@ from cli.preflight import OptionFileError, output_problems, read_option_file
 from schemas.hints import HintsModel
 from schemas.params import PipelineParams
 from schemas.result import ResultModel
+from services import pipeline
 from services.errors import JigsawError
 from services.fragments import Fragment, dropped_count, fragment_layout, fragment_points
-from services.frame_merge import FrameGroup, expand_frame_groups, group_frames, group_layout
 from services.parsing import parse_fragment
-from services.pipeline import align_clouds, place_site
-from services.rgbd import RgbdFrame
-from services.types import FloatArray, LocalLayout
+from services.pipeline import Alignment
+from services.types import FloatArray
 
 __all__ = [
     "AlignRun",
@@ -123,34 +121,6 @@ def _progress() -> Iterator[Progress]:
         yield bar
 
 
-def _frame_groups(fragments: Mapping[str, Fragment], params: PipelineParams) -> list[FrameGroup]:
-    """Overlapping RGB-D frames merged by ORB matching (groups of one for the rest)."""
-    frames = {fid: f for fid, f in fragments.items() if isinstance(f, RgbdFrame)}
-    if len(frames) < 2:
-        return [FrameGroup(fid, {fid: np.eye(4)}) for fid in frames]
-    return group_frames(frames, params.layout.frame)
-
-
-def _layouts(
-    fragments: Mapping[str, Fragment], groups: list[FrameGroup], params: PipelineParams
-) -> dict[str, LocalLayout]:
-    members = {fid for group in groups for fid in group.transforms}
-    anchors = {group.anchor_id: group for group in groups}
-    frames = {fid: f for fid, f in fragments.items() if isinstance(f, RgbdFrame)}
-    todo = [fid for fid in fragments if fid not in members or fid in anchors]
-    layouts: dict[str, LocalLayout] = {}
-    with _progress() as bar:
-        task = bar.add_task("local layouts", total=len(todo))
-        for fid in todo:
-            bar.update(task, description=f"local layout {fid}")
-            if fid in anchors:
-                layouts[fid] = group_layout(anchors[fid], frames, params)
-            else:
-                layouts[fid] = fragment_layout(fragments[fid], params)
-            bar.advance(task)
-    return layouts
-
-
 def _write_json(payload: dict[str, Any], output: Path | None) -> None:
     text = json.dumps(payload, indent=2)
     if output is None:
@@ -183,48 +153,56 @@ def run_layout(paths: list[Path], output: Path | None, params: PipelineParams | 
     return EXIT_OK
 
 
-@dataclass(frozen=True)
-class AlignRun:
-    """What one in-process alignment produced.
+class _AlignProgress:
+    """The pipeline's progress callback: the local layouts' bar, and the time of each stage.
 
-    layouts: id -> local layout; result: the contract's result; seconds: wall time per stage
-    ("local_layout", "global" = placement + refinement, and its split "placement" /
-    "refinement" when the orchestrator reported those stages).
+    A stage lasts from its first report to the first report of the next stage.
     """
 
-    layouts: dict[str, LocalLayout]
-    result: ResultModel
+    def __init__(self, bar: Progress) -> None:
+        self._bar = bar
+        self._task = bar.add_task("local layouts", total=1.0)
+        self.started: dict[str, float] = {}
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        self.started.setdefault(stage, perf_counter())
+        if stage.startswith("local layout "):
+            self._bar.update(self._task, description=stage, completed=fraction)
+        elif stage in ("placement", "done"):
+            self._bar.stop()  # the bar shows the local layouts only
+
+    def seconds(self, start: float, end: float) -> dict[str, float]:
+        """Wall time per stage: "local_layout" (frame merging included), "global" (placement
+        and refinement), and its split "placement" / "refinement" when both ran."""
+        placement = self.started.get("placement", end)
+        seconds = {"local_layout": placement - start, "global": end - placement}
+        if "placement" in self.started and "refinement" in self.started:
+            seconds["placement"] = self.started["refinement"] - placement
+            seconds["refinement"] = end - self.started["refinement"]
+        return seconds
+
+
+@dataclass(frozen=True)
+class AlignRun:
+    """An in-process alignment and the wall time of each stage (see ``_AlignProgress``)."""
+
+    alignment: Alignment
     seconds: dict[str, float]
 
 
 def align_fragments(
-    fragments: Mapping[str, Fragment], params: PipelineParams, hints: HintsModel | None = None
+    fragments: Mapping[str, Fragment],
+    params: PipelineParams,
+    hints: HintsModel | None = None,
+    premerge: bool = False,
 ) -> AlignRun:
-    """Local layouts of all fragments (overlapping RGB-D frames merged first, by ORB
-    matching), then the global placement (with ``hints``, if any); timed per stage.
-
-    The stages of :func:`services.pipeline.align_clouds` without the FPFH pre-merge, keeping
-    the layouts (for pictures) and the time of each stage. Frames merged into a group take
-    the group's placement (``merged_into`` names its anchor).
-    """
+    """:func:`services.pipeline.align_fragments` with a progress bar on the terminal, timed
+    per stage."""
     start = perf_counter()
-    groups = _frame_groups(fragments, params)
-    layouts = _layouts(fragments, groups, params)
-    middle = perf_counter()
-    marks: dict[str, float] = {}
-
-    def mark(stage: str, _fraction: float) -> None:
-        marks.setdefault(stage, perf_counter())
-
-    result = place_site(layouts, params, mark, hints=hints)
-    if any(len(group.transforms) > 1 for group in groups):
-        result = expand_frame_groups(result, groups, list(fragments))
-    end = perf_counter()
-    seconds = {"local_layout": middle - start, "global": end - middle}
-    if "placement" in marks and "refinement" in marks:
-        seconds["placement"] = marks["refinement"] - middle
-        seconds["refinement"] = end - marks["refinement"]
-    return AlignRun(layouts, result, seconds)
+    with _progress() as bar:
+        progress = _AlignProgress(bar)
+        alignment = pipeline.align_fragments(fragments, params, progress, hints, premerge)
+    return AlignRun(alignment, progress.seconds(start, perf_counter()))
 
 
 def _preflight(
@@ -287,10 +265,7 @@ def run_align(
         return EXIT_NO_INPUT
     clouds = fragment_clouds(fragments, params)
     try:
-        if premerge and not any(isinstance(f, RgbdFrame) for f in fragments.values()):
-            result = align_clouds(clouds, params, premerge_overlapping=True, hints=hints)
-        else:
-            result = align_fragments(fragments, params, hints).result
+        result = align_fragments(fragments, params, hints, premerge).alignment.result
     except Exception as exc:  # an internal failure must still end with a message and code 1
         print(f"internal error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return EXIT_INTERNAL

@@ -2,7 +2,8 @@
 
 ``estimate_layout`` is the per-fragment stage (one job per fragment in the service);
 ``place_site`` is the global stage (one job per site): placement, refinement, floorplan,
-and the contract's result.
+and the contract's result. ``align_fragments`` runs both on a set of decoded fragments (the
+CLI), merging overlapping ones first, and returns the layouts with the result.
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ from schemas.result import (
     RoomModel,
 )
 from services.confidence import Assembly, fragment_confidences, rank_assemblies
+from services.fragments import Fragment, fragment_layout, fragment_points
+from services.frame_merge import FrameGroup, expand_frame_groups, group_frames, group_layout
 from services.layout_model import build_polygon
 from services.local_layout import estimate_local_layout
 from services.placement import (
@@ -41,9 +44,18 @@ from services.placement import (
 from services.placement.priors import chain_placement, fit_frame, wrap_angle
 from services.refinement import Refinement, refine_translations
 from services.registration import premerge
-from services.types import FloatArray, LocalLayout, ProgressFn
+from services.rgbd import RgbdFrame
+from services.types import FloatArray, LocalLayout, ParsedFragment, ProgressFn
 
-__all__ = ["ProgressFn", "align_clouds", "estimate_layout", "fragment_pose", "place_site"]
+__all__ = [
+    "Alignment",
+    "ProgressFn",
+    "align_clouds",
+    "align_fragments",
+    "estimate_layout",
+    "fragment_pose",
+    "place_site",
+]
 
 
 def estimate_layout(
@@ -389,6 +401,57 @@ def place_site(
     )
 
 
+@dataclass(frozen=True)
+class Alignment:
+    """What one alignment produced.
+
+    layouts: local layout per fragment id (per merged group's anchor where fragments were
+    merged first); result: the contract's result, one entry per input fragment.
+    """
+
+    layouts: dict[str, LocalLayout]
+    result: ResultModel
+
+
+def align_fragments(
+    fragments: Mapping[str, Fragment],
+    params: PipelineParams = PipelineParams(),
+    progress: ProgressFn | None = None,
+    hints: HintsModel | None = None,
+    premerge_overlapping: bool = False,
+) -> Alignment:
+    """The whole pipeline on decoded fragments (the CLI's ``align``): local layouts, then
+    the global placement.
+
+    Overlapping RGB-D frames are merged first by ORB matching; with ``premerge_overlapping``
+    and no RGB-D frame, overlapping clouds are merged first by FPFH registration (paper
+    section 3). Either way every input fragment gets its own entry (``merged_into`` names
+    its group's anchor) and pose (the group's pose composed with its motion).
+
+    Parameters
+    ----------
+    fragments : id -> decoded cloud or RGB-D frame; the result keeps this order.
+    params : algorithm parameters.
+    progress : optional callback ``(stage, fraction)``, the only channel for timing the
+        stages: ``"pre-merge"`` or ``"frame groups"`` (0.0) when there is something to
+        merge, ``"local layout {id}"`` before each layout (the share of layouts done), then
+        the stages of :func:`place_site` (``"placement"``, ``"refinement"``, ``"done"``).
+        Each stage lasts until the next one is reported; ``"done"`` ends the run.
+    hints : optional fleet knowledge (see :func:`place_site`).
+    premerge_overlapping : run the FPFH pre-merge of clouds first.
+    """
+    report = progress or _silent
+    if premerge_overlapping and not any(isinstance(f, RgbdFrame) for f in fragments.values()):
+        clouds = {fid: fragment_points(f, params) for fid, f in fragments.items()}
+        return _premerged_alignment(clouds, params, report, hints)
+    groups = _frame_groups(fragments, params, report)
+    layouts = _local_layouts(fragments, groups, params, report)
+    result = place_site(layouts, params, report, hints=hints)
+    if any(len(group.transforms) > 1 for group in groups):
+        result = expand_frame_groups(result, groups, list(fragments))
+    return Alignment(layouts, result)
+
+
 def align_clouds(
     clouds: Mapping[str, FloatArray],
     params: PipelineParams = PipelineParams(),
@@ -396,35 +459,77 @@ def align_clouds(
     premerge_overlapping: bool = False,
     hints: HintsModel | None = None,
 ) -> ResultModel:
-    """The whole pipeline on in-memory fragments (the CLI's ``align``).
-
-    With ``premerge_overlapping``, fragments whose FPFH registration has more than the
-    configured share of inliers are first merged (paper section 3); every input fragment
-    still gets its own pose (the group's pose composed with its registration).
+    """The result of :func:`align_fragments` on in-memory clouds.
 
     Parameters
     ----------
     clouds : id -> (N, 3) float64, fragment-local points, meters.
     params : algorithm parameters.
-    progress : optional callback ``(stage, fraction)``.
+    progress : optional callback ``(stage, fraction)`` (see :func:`align_fragments`).
     premerge_overlapping : run the FPFH pre-merge first.
     hints : optional fleet knowledge (see :func:`place_site`).
     """
-    report = progress or (lambda stage, fraction: None)
+    fragments = {fid: ParsedFragment(points, "memory") for fid, points in clouds.items()}
+    return align_fragments(fragments, params, progress, hints, premerge_overlapping).result
+
+
+def _silent(stage: str, fraction: float) -> None:
+    """The progress callback of a caller that asked for none."""
+
+
+def _frame_groups(
+    fragments: Mapping[str, Fragment], params: PipelineParams, report: ProgressFn
+) -> list[FrameGroup]:
+    """Overlapping RGB-D frames merged by ORB matching (groups of one for the rest)."""
+    frames = {fid: f for fid, f in fragments.items() if isinstance(f, RgbdFrame)}
+    if len(frames) < 2:
+        return [FrameGroup(fid, {fid: np.eye(4)}) for fid in frames]
+    report("frame groups", 0.0)
+    return group_frames(frames, params.layout.frame)
+
+
+def _local_layouts(
+    fragments: Mapping[str, Fragment],
+    groups: Sequence[FrameGroup],
+    params: PipelineParams,
+    report: ProgressFn,
+) -> dict[str, LocalLayout]:
+    """A layout per fragment, a merged group's (from all its frames) under its anchor's id."""
+    members = {fid for group in groups for fid in group.transforms}
+    anchors = {group.anchor_id: group for group in groups}
+    frames = {fid: f for fid, f in fragments.items() if isinstance(f, RgbdFrame)}
+    todo = [fid for fid in fragments if fid not in members or fid in anchors]
+    layouts: dict[str, LocalLayout] = {}
+    for index, fid in enumerate(todo):
+        report(f"local layout {fid}", index / len(todo))
+        if fid in anchors:
+            layouts[fid] = group_layout(anchors[fid], frames, params)
+        else:
+            layouts[fid] = fragment_layout(fragments[fid], params)
+    return layouts
+
+
+def _premerged_alignment(
+    clouds: Mapping[str, FloatArray],
+    params: PipelineParams,
+    report: ProgressFn,
+    hints: HintsModel | None,
+) -> Alignment:
+    """Clouds whose FPFH registration has more than the configured share of inliers merged
+    first, then laid out and placed as one fragment per group."""
     groups: dict[str, dict[str, FloatArray]] = {fid: {fid: np.eye(4)} for fid in clouds}
     merged: Mapping[str, FloatArray] = clouds
-    if premerge_overlapping and len(clouds) > 1:
+    if len(clouds) > 1:
         report("pre-merge", 0.0)
-        result = premerge(clouds, params.registration)
-        groups = {g.anchor_id: dict(g.transforms) for g in result.groups}
-        merged = {g.anchor_id: g.points for g in result.groups}
+        premerged = premerge(clouds, params.registration)
+        groups = {g.anchor_id: dict(g.transforms) for g in premerged.groups}
+        merged = {g.anchor_id: g.points for g in premerged.groups}
     layouts = {}
     for index, (gid, points) in enumerate(merged.items()):
         report(f"local layout {gid}", index / max(len(merged), 1))
         layouts[gid] = estimate_layout(points, params)
-    report("placement", 0.9)
-    placed = place_site(layouts, params, hints=hints)
-    return _expand_groups(placed, groups, list(clouds))
+    placed = place_site(layouts, params, report, hints=hints)
+    return Alignment(layouts, _expand_groups(placed, groups, list(clouds)))
 
 
 def _expand_groups(

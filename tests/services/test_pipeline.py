@@ -14,9 +14,9 @@ from schemas.params import PipelineParams, RegistrationParams
 from schemas.result import ResultModel, Status
 from services.evaluation import evaluate_result, polygon_keypoint_error
 from services.geometry import signed_area
-from services.pipeline import align_clouds, estimate_layout, place_site
+from services.pipeline import align_clouds, align_fragments, estimate_layout, place_site
 from services.synthetic import ground_truth_json
-from services.types import LocalLayout, ManhattanFrame
+from services.types import LocalLayout, ManhattanFrame, ParsedFragment
 from tests.conftest import UNTUNED, chains_from_polygon, small_scene
 
 pytestmark = pytest.mark.timeout(300)
@@ -110,6 +110,17 @@ def test_non_manhattan_room_gives_a_defined_status():
     result = place_site({fid: estimate_layout(p) for fid, p in halves.items()})
     assert result.status in ("open", "closed", "failed")
     ResultModel.model_validate(result.model_dump())
+
+
+def test_align_fragments_returns_the_layouts_with_the_result_and_reports_each_stage():
+    scene = small_scene("easy", 0)
+    fragments = {f.id: ParsedFragment(f.points, "ply") for f in scene.fragments}
+    stages: list[str] = []
+    alignment = align_fragments(fragments, progress=lambda stage, _fraction: stages.append(stage))
+    assert list(alignment.layouts) == list(fragments)
+    assert alignment.result == place_site(alignment.layouts)
+    layout_stages = [f"local layout {fid}" for fid in fragments]
+    assert stages == [*layout_stages, "placement", "refinement", "done"]
 
 
 def test_premerge_gives_every_input_fragment_a_pose():
