@@ -21,8 +21,9 @@ from cli.exports import ExportTargets, write_exports
 from cli.frames import dataset_frames, is_dataset, is_frame_dir, read_frame_dir, read_frame_zip
 from cli.preflight import OptionFileError, output_problems, read_option_file
 from schemas.hints import HintsModel
+from schemas.layout_file import LayoutFileModel, LayoutFragmentModel
 from schemas.params import PipelineParams
-from schemas.result import ResultModel
+from schemas.result import LocalLayoutModel, ResultModel
 from services import pipeline
 from services.errors import JigsawError
 from services.fragments import Fragment, dropped_count, fragment_layout, fragment_points
@@ -131,7 +132,8 @@ def _write_json(payload: dict[str, Any], output: Path | None) -> None:
 
 
 def run_layout(paths: list[Path], output: Path | None, params: PipelineParams | None = None) -> int:
-    """``jigsaw layout``: local layouts of all usable fragments as JSON. Returns the exit code."""
+    """``jigsaw layout``: local layouts of all usable fragments as JSON
+    (:class:`schemas.layout_file.LayoutFileModel`). Returns the exit code."""
     params = params or PipelineParams()
     inputs = read_fragments(paths, params)
     if not inputs:
@@ -139,17 +141,17 @@ def run_layout(paths: list[Path], output: Path | None, params: PipelineParams | 
         return EXIT_NO_INPUT
     layouts = {fid: fragment_layout(f, params) for fid, f in inputs.items()}
     fragments = [
-        {
-            "id": fid,
-            "local_layout": {"keypoints": lay.keypoints_local().tolist()},
-            "manhattan_rotation": lay.frame.rotation.tolist(),
-            "floor_z": lay.frame.floor_z,
-            "ceiling_z": lay.frame.ceiling_z,
-            "walls_found": lay.ok,
-        }
+        LayoutFragmentModel(
+            id=fid,
+            local_layout=LocalLayoutModel(keypoints=lay.keypoints_local().tolist()),
+            manhattan_rotation=lay.frame.rotation.tolist(),
+            floor_z=lay.frame.floor_z,
+            ceiling_z=lay.frame.ceiling_z,
+            walls_found=lay.ok,
+        )
         for fid, lay in layouts.items()
     ]
-    _write_json({"schema_version": 1, "fragments": fragments}, output)
+    _write_json(LayoutFileModel(fragments=fragments).model_dump(mode="json"), output)
     return EXIT_OK
 
 

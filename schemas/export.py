@@ -17,6 +17,7 @@ from pydantic import BaseModel, TypeAdapter
 from schemas.hints import HintsModel
 from schemas.jobs import DeadLetter, Job
 from schemas.layout import LocalLayoutWire
+from schemas.layout_file import LayoutFileModel
 from schemas.params import PipelineParams
 from schemas.result import ResultModel
 from schemas.service import (
@@ -45,6 +46,7 @@ _MODELS: dict[str, type[BaseModel]] = {
     "pose_update": PoseUpdate,
     "service_info": ServiceInfo,
     "local_layout_wire": LocalLayoutWire,
+    "layout_file": LayoutFileModel,
     "dead_letter": DeadLetter,
     "pipeline_params": PipelineParams,
 }

@@ -9,10 +9,13 @@ import shutil
 from pathlib import Path
 from typing import Any
 
+import jsonschema
 import numpy as np
 import open3d as o3d
 import pytest
 
+from schemas.export import SCHEMA_DIR
+from schemas.layout_file import LayoutFileModel
 from schemas.result import ResultModel
 from services.parsing import parse_fragment
 from services.point_io import encode_ply
@@ -120,6 +123,9 @@ def test_layout_writes_keypoints(
     process = run_jigsaw("layout", scene_dir, "-o", tmp_path / "layout.json")
     assert process.returncode == 0, process.stderr
     data = json.loads((tmp_path / "layout.json").read_text())
+    schema = json.loads((SCHEMA_DIR / "layout_file.schema.json").read_text(encoding="utf-8"))
+    jsonschema.validate(data, schema)
+    assert LayoutFileModel.model_validate(data).model_dump(mode="json") == data
     assert {f["id"] for f in data["fragments"]} == {f.id for f in small_scene.fragments}
     for fragment in data["fragments"]:
         keypoints = np.asarray(fragment["local_layout"]["keypoints"])
