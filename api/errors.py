@@ -59,22 +59,32 @@ class ServiceError(JigsawError):
 
 
 class InvalidIdError(ServiceError):
+    """An id that does not match :data:`schemas.ids.ID_PATTERN`."""
+
     code = "invalid_id"
 
 
 class NotFoundError(ServiceError):
+    """Something the request names does not exist."""
+
     code = "not_found"
 
 
 class SiteNotFoundError(NotFoundError):
+    """No fragment or hints of this site were ever accepted (or it was deleted)."""
+
     code = "site_not_found"
 
 
 class FragmentNotFoundError(NotFoundError):
+    """The site holds no fragment of this id."""
+
     code = "fragment_not_found"
 
 
 class HintsNotFoundError(NotFoundError):
+    """No hints were given for this site."""
+
     code = "hints_not_found"
 
 
@@ -97,6 +107,8 @@ class InvalidPriorError(InvalidHintsError):
 
 
 class HintsTooLargeError(InvalidHintsError):
+    """A hints body larger than the hints limit."""
+
     code = "hints_too_large"
 
 
@@ -107,6 +119,8 @@ class ConflictError(ServiceError):
 
 
 class UnauthorizedError(ServiceError):
+    """No token where tokens are configured."""
+
     code = "unauthorized"
 
 

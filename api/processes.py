@@ -92,6 +92,7 @@ class EmbeddedRedis:
 
     @property
     def url(self) -> str:
+        """The URL clients use: the server's unix socket."""
         return f"unix://{self._socket_dir}/redis.sock"
 
     def _lock(self) -> None:
@@ -170,6 +171,7 @@ class WorkerSupervisor:
         self._thread = threading.Thread(target=self._run, name="worker-supervisor", daemon=True)
 
     def start(self) -> None:
+        """Start the workers and their watcher thread (returns once they are spawned)."""
         self._thread.start()
         self._started.wait(10.0)
 
@@ -195,6 +197,7 @@ class WorkerSupervisor:
         self._terminate()
 
     def pids(self) -> list[int]:
+        """Process ids of the running workers."""
         return [p.pid for p in self.processes]
 
     def stop(self, grace: float = 30.0) -> None:

@@ -63,6 +63,13 @@ async def load_site_status(backend: Backend, site_id: str) -> SiteStatus:
 
 
 async def load_fragment(backend: Backend, site_id: str, fragment_id: str) -> FragmentStatus:
+    """The fragment's status record.
+
+    Raises
+    ------
+    FragmentNotFoundError
+        The site holds no fragment of this id.
+    """
     found = record(await backend.redis.hgetall(backend.keys.fragment(site_id, fragment_id)))
     if not found:
         raise FragmentNotFoundError(f"site {site_id!r} has no fragment {fragment_id!r}")

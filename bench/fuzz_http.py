@@ -53,6 +53,7 @@ class Row:
     examples: list[str] = field(default_factory=list)
 
     def record(self, status: int, problems: list[str]) -> None:
+        """Count one answer of the route, and what was wrong with it."""
         self.requests += 1
         self.statuses[status] += 1
         self.server_errors += status >= 500
@@ -164,6 +165,7 @@ def fuzz_events(base_url: str, examples: int, run_seed: int, row: Row) -> None:
 
 
 def main() -> None:
+    """Fuzz the API (command-line options: see ``--help``) and print the table."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--examples", type=int, default=300, help="cases per operation")
     parser.add_argument("--stateful", type=int, default=100, help="stateful sequences")

@@ -88,7 +88,7 @@ class SceneRun:
     baseline_seconds: float = math.nan
 
     def ours(self) -> dict[str, tuple[float, float]]:
-        """id -> (rotation deg, translation % diag) of our placed fragments."""
+        """Fragment id -> (rotation deg, translation % diag) of our placed fragments."""
         return {i: (e.rotation_deg, e.translation_pct) for i, e in self.report.pose_errors.items()}
 
 

@@ -33,6 +33,7 @@ from services.types import FloatArray
 def run(
     n_scenes: int, first_seed: int, outlines: list[FloatArray] | None = None
 ) -> dict[str, float]:
+    """Local and global figures over ``n_scenes`` frame scenes from ``first_seed``."""
     spec = FrameSpec()
     local, global_ok, rotation, translation, frames, statuses = [], [], [], [], [], []
     seconds, cpu = [], []
@@ -82,6 +83,7 @@ def _row(name: str, r: dict[str, float]) -> str:
 
 
 def main() -> None:
+    """Run the benchmark (command-line options: see ``--help``) and print its table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", type=int, default=20)
     parser.add_argument("--seed", type=int, default=1000, help="first seed (unseen: >= 1000)")

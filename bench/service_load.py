@@ -85,6 +85,7 @@ class Service:
         return env
 
     def start(self) -> None:
+        """Start Redis, the API and the workers; return once all workers are ready."""
         self.processes.append(
             subprocess.Popen(
                 [
@@ -121,6 +122,7 @@ class Service:
             time.sleep(0.1)
 
     def stop(self) -> None:
+        """Stop every process, newest first (killed after 30 s)."""
         for process in reversed(self.processes):
             process.terminate()
             try:
@@ -138,6 +140,7 @@ def _ping(client: redis.Redis) -> bool:
 
 @contextmanager
 def running(workers: int, concurrency: int) -> Iterator[Service]:
+    """A running service with ``workers`` workers, stopped after the block."""
     service = Service(workers, concurrency)
     try:
         service.start()
@@ -177,6 +180,7 @@ def settled(http: httpx.Client, site: str) -> dict[str, Any] | None:
 
 
 def wait_settled(url: str, sites: list[str], timeout: float) -> tuple[float, dict[str, str]]:
+    """Wait until every site's placement settled: (the time, result status per site)."""
     statuses: dict[str, str] = {}
     with httpx.Client(base_url=url, timeout=30) as http:
         deadline = time.monotonic() + timeout
@@ -229,6 +233,7 @@ def _epoch(stamp: str) -> float:
 
 
 def run_latency(service: Service, fragments: dict[str, bytes], robots: int) -> dict[str, Any]:
+    """One site's fragments uploaded at once: time to the result and where it went."""
     site = "latency"
     uploads = [(site, fid, data) for fid, data in fragments.items()]
     start = time.perf_counter()
@@ -247,6 +252,7 @@ def run_latency(service: Service, fragments: dict[str, bytes], robots: int) -> d
 def run_throughput(
     service: Service, fragments: dict[str, bytes], sites: int, robots: int
 ) -> dict[str, Any]:
+    """The fragments uploaded to ``sites`` sites at once: uploads per second, time to settle."""
     names = [f"load-{n}" for n in range(sites)]
     uploads = [(site, fid, data) for fid, data in fragments.items() for site in names]
     size = sum(len(data) for _, _, data in uploads)
@@ -265,6 +271,7 @@ def run_throughput(
 
 
 def main() -> int:
+    """Run the benchmark (command-line options: see ``--help``) and print its tables."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--concurrency", type=int, default=1, help="jobs per worker")

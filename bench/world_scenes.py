@@ -63,10 +63,12 @@ class CachedScene:
 
     @property
     def seed(self) -> int:
+        """The scene generator's seed."""
         return int(self.truth["seed"])
 
     @property
     def n_fragments(self) -> int:
+        """How many fragments the scene was cut into."""
         return len(self.truth["fragments"])
 
 

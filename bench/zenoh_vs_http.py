@@ -78,6 +78,7 @@ def fragment(points: int, seed: int) -> bytes:
 
 
 def timed(send: Callable[[str], None], ids: list[str]) -> list[float]:
+    """Seconds each ``send`` of an id took."""
     latencies = []
     for fid in ids:
         start = time.perf_counter()
@@ -100,6 +101,7 @@ def _row(name: str, kind: str, data: bytes, size: int, values: list[float]) -> d
 
 
 def run(sizes: list[int], repeat: int) -> list[dict[str, Any]]:
+    """Upload latency over zenoh and HTTP per cloud size: one table row each."""
     zenoh_port, http_port = free_tcp_port(), free_tcp_port()
     keys = ZenohKeys()
     rows = []
@@ -143,6 +145,7 @@ def run(sizes: list[int], repeat: int) -> list[dict[str, Any]]:
 
 
 def main() -> None:
+    """Run the benchmark (command-line options: see ``--help``) and print its table."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[10_000, 100_000, 1_000_000])
     parser.add_argument("--repeat", type=int, default=10)

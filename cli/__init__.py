@@ -1,1 +1,1 @@
-
+"""The ``jigsaw`` command line: commands, file I/O, pictures, the demo."""

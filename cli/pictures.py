@@ -148,9 +148,11 @@ class Canvas:
         self.label((xmin, ymin - 0.05), f"{meters:g} m")
 
     def png(self) -> bytes:
+        """The picture as PNG bytes."""
         return encode_png(self._image)
 
     def svg(self) -> str:
+        """The picture as an SVG document."""
         body = "\n".join(self._svg)
         return (
             f'<svg xmlns="http://www.w3.org/2000/svg" width="{self.width}" height="{self.height}">'

@@ -50,6 +50,7 @@ class RobotOptions:
 
     @property
     def keys(self) -> ZenohKeys:
+        """The service's key expressions under this prefix."""
         return ZenohKeys(self.prefix)
 
     def attachment(self, prior: FragmentPrior | None = None) -> bytes | None:

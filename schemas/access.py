@@ -47,6 +47,7 @@ class Scope(BaseModel):
 
     @property
     def all_sites(self) -> bool:
+        """True when the scope names every site (``*``)."""
         return ALL in self.sites
 
     def covers(self, site_id: str) -> bool:

@@ -34,6 +34,8 @@ class _Open(BaseModel):
 
 
 class LocalLayoutModel(_Open):
+    """A fragment's local layout as the result reports it."""
+
     keypoints: list[list[float]] = Field(
         default_factory=list,
         description="wall keypoints, source to target, fragment-local frame, floor height",
@@ -41,6 +43,8 @@ class LocalLayoutModel(_Open):
 
 
 class FragmentResultModel(_Open):
+    """One input fragment's entry of the result: whether and where it was placed."""
+
     id: str
     placed: bool
     pose: Pose | None = Field(
@@ -59,6 +63,8 @@ class FragmentResultModel(_Open):
 
 
 class RoomModel(_Open):
+    """A closed room of the floorplan, in the site frame."""
+
     id: str
     polygon: list[list[float]] = Field(description="counter-clockwise, first vertex not repeated")
     floor_z: float = 0.0
@@ -66,10 +72,14 @@ class RoomModel(_Open):
 
 
 class FloorplanModel(_Open):
+    """The rooms found (none unless the result is closed or ambiguous)."""
+
     rooms: list[RoomModel] = Field(default_factory=list)
 
 
 class AlternativeFragmentModel(_Open):
+    """A fragment's pose in an alternative assembly."""
+
     id: str
     pose: Pose = Field(description="4x4 row-major, fragment-local -> site frame")
     loop_index: int | None = None
@@ -84,6 +94,8 @@ class AlternativeModel(_Open):
 
 
 class ResultModel(_Open):
+    """The result of placing a site's fragments (contract section 3)."""
+
     schema_version: Literal[2] = SCHEMA_VERSION
     status: Status
     confidence: float = Field(

@@ -53,6 +53,8 @@ class _Wire(BaseModel):
 
 
 class ErrorDetail(_Wire):
+    """What went wrong: a stable code and a message."""
+
     code: str = Field(description="stable machine-readable identifier", examples=["conflict"])
     message: str = Field(description="human-readable explanation")
 
@@ -78,6 +80,8 @@ class UploadReply(_Wire):
 
 
 class FragmentStatus(_Wire):
+    """A fragment's processing state, as the site status reports it."""
+
     fragment_id: str
     state: FragmentState
     stage: str = Field("", description="pipeline stage of the running job")
@@ -94,6 +98,8 @@ class FragmentStatus(_Wire):
 
 
 class PlacementStatus(_Wire):
+    """The state of the site's placement, and what its newest result says."""
+
     state: PlacementState = PlacementState.IDLE
     stage: str = ""
     progress: float = Field(0.0, ge=0.0, le=1.0)
@@ -123,6 +129,8 @@ class RobotStatus(_Wire):
 
 
 class SiteStatus(_Wire):
+    """``GET /v1/sites/{site}``: the site's fragments, placement and connected robots."""
+
     site_id: str
     created_at: Time | None = Field(
         description="first upload or hints, ISO 8601; null only in the event stream of a site "
@@ -138,6 +146,8 @@ class SiteStatus(_Wire):
 
 
 class SiteSummary(_Wire):
+    """One site of the site list."""
+
     site_id: str
     n_fragments: int
     placement: PlacementStatus
@@ -145,6 +155,8 @@ class SiteSummary(_Wire):
 
 
 class SiteList(_Wire):
+    """``GET /v1/sites``: one page of sites, and how many there are."""
+
     sites: list[SiteSummary]
     total: int
 
@@ -158,10 +170,14 @@ class PendingReply(_Wire):
 
 
 class HealthReply(_Wire):
+    """``GET /healthz``: the process answers."""
+
     status: Literal["ok"] = "ok"
 
 
 class ReadyReply(_Wire):
+    """``GET /readyz``: Redis answers and workers are alive."""
+
     status: Literal["ready"] = "ready"
     redis: Literal["ok"] = "ok"
     workers: int = Field(description="workers with a recent heartbeat")

@@ -21,7 +21,7 @@ _PCD_MAGIC = (b"# .PCD", b"VERSION", b"FIELDS")
 
 
 def detect_format(data: bytes) -> str:
-    """Name the point-cloud format of ``data`` from its first bytes.
+    r"""Name the point-cloud format of ``data`` from its first bytes.
 
     Parameters
     ----------
@@ -40,9 +40,9 @@ def detect_format(data: bytes) -> str:
 
     Examples
     --------
-    >>> detect_format(b"ply\\nformat ascii 1.0\\n")
+    >>> detect_format(b"ply\nformat ascii 1.0\n")
     'ply'
-    >>> detect_format(b"# .PCD v0.7\\n")
+    >>> detect_format(b"# .PCD v0.7\n")
     'pcd'
     """
     if not data:

@@ -51,12 +51,12 @@ def check_point_count(count: int, max_points: int, fmt: str) -> None:
 
 
 def parse_ascii_block(text: bytes, n_rows: int, n_cols: int, fmt: str) -> FloatArray:
-    """Parse whitespace-separated numbers into an ``(n_rows, n_cols)`` float64 table.
+    r"""Parse whitespace-separated numbers into an ``(n_rows, n_cols)`` float64 table.
 
     Parameters
     ----------
     text : bytes
-        The data lines (any whitespace, including ``\\r\\n``, separates values).
+        The data lines (any whitespace, including ``\r\n``, separates values).
     n_rows, n_cols : int
         Shape the header declares.
     fmt : str

@@ -44,4 +44,5 @@ class Backend:
         return cls(settings, client, keys)
 
     async def aclose(self) -> None:
+        """Close the Redis connection pool."""
         await self.redis.aclose()

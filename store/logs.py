@@ -63,6 +63,7 @@ class TextFormatter(logging.Formatter):
     """``TIME LEVEL logger[pid]: message key=value ...`` (values with spaces quoted)."""
 
     def format(self, record: logging.LogRecord) -> str:
+        """The record as one text line (the traceback on the following lines)."""
         line = f"{_time(record)} {record.levelname} {record.name}[{record.process}]: "
         line += record.getMessage()
         extra = " ".join(f"{key}={_text(value)}" for key, value in _given_fields(record).items())
@@ -77,6 +78,7 @@ class JsonFormatter(logging.Formatter):
     """One JSON object per record: time, level, logger, pid, message, then the fields."""
 
     def format(self, record: logging.LogRecord) -> str:
+        """The record as one JSON object."""
         entry: dict[str, Any] = {
             "time": _time(record),
             "level": record.levelname,

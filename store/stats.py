@@ -59,6 +59,12 @@ class Histogram:
 
 @dataclass
 class JobStats:
+    """The counters and histograms of the stats hash.
+
+    counts: (kind, outcome) -> jobs; durations: kind -> run time; latencies: kind -> time
+    from enqueue to the first try's start.
+    """
+
     counts: dict[tuple[str, str], int] = field(default_factory=dict)
     durations: dict[str, Histogram] = field(default_factory=dict)
     latencies: dict[str, Histogram] = field(default_factory=dict)

@@ -61,14 +61,17 @@ class LeaseBook:
         self._leases: dict[str, Lease] = {}
 
     def hold(self, lease: Lease) -> None:
+        """Record that ``lease.consumer`` runs ``lease``'s job."""
         with self._lock:
             self._leases[lease.consumer] = lease
 
     def release(self, consumer: str) -> None:
+        """The consumer's job is over."""
         with self._lock:
             self._leases.pop(consumer, None)
 
     def snapshot(self) -> list[Lease]:
+        """The leases held now."""
         with self._lock:
             return list(self._leases.values())
 
@@ -320,6 +323,8 @@ class Keeper:
         self.period = min(settings.heartbeat_interval_s, settings.visibility_timeout_s / 3)
 
     def run(self) -> None:
+        """Every period until ``stop`` is set: the heartbeat, the running jobs re-claimed, their
+        deadlines checked; now and then the consumers of dead workers pruned."""
         next_prune = time.monotonic() + PRUNE_PERIOD_S
         while not self.stop.wait(self.period):
             self.beat()

@@ -57,11 +57,15 @@ class Handler(Protocol):
     """One job kind: run it (returning its report), or record that it failed (``final``: no
     more tries)."""
 
-    def run(self, ctx: JobContext, job: LayoutJob | PlacementJob) -> JobReport: ...
+    def run(self, ctx: JobContext, job: LayoutJob | PlacementJob) -> JobReport:
+        """Run the job; the report is logged."""
+        ...
 
     def failed(
         self, ctx: JobContext, job: LayoutJob | PlacementJob, error: ErrorDetail, final: bool
-    ) -> None: ...
+    ) -> None:
+        """Record that the job failed with ``error`` (``final``: it will not be tried again)."""
+        ...
 
 
 _J = TypeVar("_J", LayoutJob, PlacementJob)
@@ -78,6 +82,7 @@ class LayoutHandler:
     local layout."""
 
     def run(self, ctx: JobContext, job: LayoutJob | PlacementJob) -> JobReport:
+        """Lay out the stored fragment and store its layout; queue the site's placement."""
         job = _expect(job, LayoutJob)
         from services.fragments import fragment_layout, reading_count
         from services.uploads import decode_upload
@@ -111,6 +116,7 @@ class LayoutHandler:
     def failed(
         self, ctx: JobContext, job: LayoutJob | PlacementJob, error: ErrorDetail, final: bool
     ) -> None:
+        """Mark the fragment failed (``final``) or queued for another try."""
         job = _expect(job, LayoutJob)
         state = FragmentState.FAILED if final else FragmentState.QUEUED
         fields = {"state": state.value, "stage": "failed" if final else "retrying"}
@@ -200,6 +206,8 @@ class PlacementHandler:
     """Place the site's laid-out fragments; coalesced so one runs per site at a time."""
 
     def run(self, ctx: JobContext, job: LayoutJob | PlacementJob) -> JobReport:
+        """Place the site's laid-out fragments and store the result (nothing when superseded,
+        the site is gone or layouts are still pending)."""
         job = _expect(job, PlacementJob)
         site_id, flag = job.site_id, ctx.keys.placement_flag(job.site_id)
         holder = ctx.client.get(flag)
@@ -263,6 +271,7 @@ class PlacementHandler:
     def failed(
         self, ctx: JobContext, job: LayoutJob | PlacementJob, error: ErrorDetail, final: bool
     ) -> None:
+        """Mark the placement failed (``final``) or queued for another try."""
         job = _expect(job, PlacementJob)
         state = PlacementState.FAILED if final else PlacementState.QUEUED
         fields = {"placement_state": state.value, "placement_stage": "failed" if final else ""}

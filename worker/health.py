@@ -17,6 +17,7 @@ __all__ = ["main"]
 
 
 def main() -> int:
+    """The exit code: 0 when a worker of this host is alive, else 1."""
     settings = get_settings()
     if not settings.redis_url:
         return 1

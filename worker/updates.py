@@ -162,6 +162,7 @@ class Progress:
         self._last = (0.0, "")
 
     def __call__(self, stage: str, fraction: float) -> None:
+        """Report progress: write it (throttled), or raise once past the deadline."""
         now = time.monotonic()
         if now > self.ctx.deadline:
             raise JobTimeoutError(f"job exceeded its time limit during {stage!r}")

@@ -61,6 +61,7 @@ class Request:
 
     @classmethod
     def of(cls, query: zenoh.Query) -> Request:
+        """The parts of ``query`` a handler reads (its parameters: robot id and token)."""
         found = {name: query.parameters.get(name) for name in ("robot_id", "token")}
         return cls(
             key=str(query.key_expr),

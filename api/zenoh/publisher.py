@@ -55,6 +55,7 @@ class ResultPublisher:
                     await asyncio.wait_for(self._stopped.wait(), 1.0)
 
     async def stop(self) -> None:
+        """Make :meth:`run` return."""
         self._stopped.set()
 
     async def _follow(self) -> None:

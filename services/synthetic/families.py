@@ -129,7 +129,7 @@ _U_CELLS = np.array([[True, True], [True, False], [True, True]])
 def _comb(
     rng: np.random.Generator, size: tuple[float, float], target: int, min_edge: float
 ) -> _Grid:
-    """target / 4 teeth on a base: row 0 full, row 1 only in the even columns."""
+    """``target`` / 4 teeth on a base: row 0 full, row 1 only in the even columns."""
     teeth = target // 4
     long, short = max(size), min(size)
     xs, ys = _lines(rng, (long, short), (2 * teeth - 1, 2), min_edge)

@@ -53,7 +53,7 @@ COMB = np.array(
 
 
 def _random_cuts(rng: np.random.Generator, n: int) -> list[float]:
-    """n cut positions on the L room's loop, at least 0.5 m apart."""
+    """``n`` cut positions on the L room's loop, at least 0.5 m apart."""
     while True:
         cuts = sorted(rng.uniform(0.0, L_PERIMETER, size=n).tolist())
         if min(np.diff([*cuts, cuts[0] + L_PERIMETER])) > 0.5:
