@@ -13,7 +13,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Annotated, Literal, NamedTuple
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, SecretStr, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from schemas.access import Scope, parse_scopes
@@ -138,6 +138,40 @@ class Settings(BaseSettings):
         description="transport/link/rx/max_message_size; default 2 x max_upload_bytes + 1 MiB, "
         "so an oversized fragment still arrives and gets a fragment_too_large reply",
     )
+    zenoh_tls_certificate: Path | None = Field(
+        None,
+        description="PEM certificate of the service on tls/ listen endpoints (and, with "
+        "zenoh_tls_mtls, when it connects)",
+    )
+    zenoh_tls_private_key: Path | None = Field(
+        None, description="PEM private key of zenoh_tls_certificate"
+    )
+    zenoh_tls_root_ca: Path | None = Field(
+        None,
+        description="PEM certificate of the CA that signs the peers' certificates (with "
+        "zenoh_tls_mtls) and those of the routers the service connects to over tls/",
+    )
+    zenoh_tls_mtls: bool = Field(
+        False,
+        description="mutual TLS: tls/ peers must show a certificate signed by "
+        "zenoh_tls_root_ca, and zenoh_acl knows them by its common name",
+    )
+    zenoh_users_file: Path | None = Field(
+        None,
+        description="user:password lines (zenoh's usrpwd dictionary): peers must open their "
+        "session with one of these, and zenoh_acl knows them by the user name",
+    )
+    zenoh_user: str | None = Field(
+        None, description="the service's user name when it connects to a peer that checks one"
+    )
+    zenoh_password: SecretStr | None = Field(None, description="the password of zenoh_user")
+    zenoh_acl: Annotated[dict[str, Scope], NoDecode] = Field(
+        default_factory=dict,
+        description="zenoh access control: comma-separated PEER[:SITES[:RIGHTS]], PEER a "
+        "certificate common name (zenoh_tls_mtls) or a user name (zenoh_users_file), rights "
+        "upload (put or query fragments) and read (subscribe to or query results and poses); "
+        "every other peer and message is denied; empty: no access control",
+    )
     zenoh_presence_ttl_s: float = Field(
         10.0, gt=0, description="robot presence in Redis expires unless refreshed this often"
     )
@@ -184,9 +218,9 @@ class Settings(BaseSettings):
         "floorplan_jigsaw", pattern=_ROS_TOKEN, description="ROS node name in the graph"
     )
 
-    @field_validator("tokens", mode="before")
+    @field_validator("tokens", "zenoh_acl", mode="before")
     @classmethod
-    def _parse_tokens(cls, value: object) -> object:
+    def _parse_scopes(cls, value: object) -> object:
         return parse_scopes(value)
 
     @field_validator("zenoh_listen", "zenoh_connect")
@@ -228,12 +262,39 @@ class Settings(BaseSettings):
     def _check_zenoh_mode(self) -> Settings:
         if self.zenoh_enabled and self.zenoh_mode == "client" and not self.zenoh_connect_endpoints:
             raise ValueError("zenoh client mode needs FPJ_ZENOH_CONNECT endpoints")
+        if message := self._zenoh_security_problem():
+            raise ValueError(message)
         if self.zenoh_rx_max_message_size <= self.max_upload_bytes:
             raise ValueError(
                 "zenoh_max_message_bytes must exceed max_upload_bytes (zenoh drops "
                 "larger messages silently, so fragments could vanish unanswered)"
             )
         return self
+
+    def _zenoh_security_problem(self) -> str | None:
+        """What is missing for the zenoh TLS, authentication and access control settings to
+        work together (zenoh would refuse them only when the session opens, or not at all)."""
+        own = self.zenoh_tls_certificate is not None and self.zenoh_tls_private_key is not None
+        endpoints = self.zenoh_listen_endpoints
+        if any(e.startswith(("tls/", "quic/")) for e in endpoints) and not own:
+            return "tls/ listen endpoints need FPJ_ZENOH_TLS_CERTIFICATE and _PRIVATE_KEY"
+        if self.zenoh_tls_mtls and not (own and self.zenoh_tls_root_ca is not None):
+            return "FPJ_ZENOH_TLS_MTLS needs the service's certificate, its key and the root CA"
+        if (self.zenoh_user is None) != (self.zenoh_password is None):
+            return "FPJ_ZENOH_USER and FPJ_ZENOH_PASSWORD go together"
+        if self.zenoh_acl and not (self.zenoh_tls_mtls or self.zenoh_users_file is not None):
+            return (
+                "FPJ_ZENOH_ACL names peers by certificate or user name: set FPJ_ZENOH_TLS_MTLS "
+                "or FPJ_ZENOH_USERS_FILE, else every peer is unknown"
+            )
+        if self.zenoh_acl and self.ros_enabled:
+            return "FPJ_ZENOH_ACL does not cover the ROS 2 topics: set one or the other"
+        return None
+
+    @property
+    def zenoh_secured(self) -> bool:
+        """True when zenoh peers must authenticate (mutual TLS or user names)."""
+        return self.zenoh_tls_mtls or self.zenoh_users_file is not None
 
     @property
     def zenoh_enabled(self) -> bool:

@@ -40,7 +40,7 @@ from schemas.zenoh import RobotTag, SenderRecord, ServiceInfo
 from services.errors import JigsawError
 from store.backend import Backend
 from store.connection import strings
-from transport.config import build_config, service_options
+from transport.config import build_config, reachable_from_network, service_options
 from transport.keys import ZenohKeys
 
 __all__ = ["Request", "ResultPendingError", "ZenohFront"]
@@ -122,10 +122,13 @@ class ZenohFront:
             asyncio.create_task(front.publisher.run(), name="zenoh-results"),
             asyncio.create_task(front.robots.run(), name="zenoh-presence"),
         ]
-        if backend.settings.tokens:
+        open_to = [e for e in options.listen if reachable_from_network(e)]
+        if open_to and options.access_control is None:
             log.warning(
-                "FPJ_TOKENS guards zenoh queries and puts, not the published results "
-                "and poses: use zenoh access control and TLS for those"
+                "zenoh listens on %s without access control: any peer that connects can "
+                "subscribe to results and poses%s (README, Zenoh security: FPJ_ZENOH_ACL)",
+                ", ".join(open_to),
+                "" if backend.settings.tokens else " and send fragments",
             )
         log.info(
             "zenoh front end %s (%s) listening on %s, connecting to %s",

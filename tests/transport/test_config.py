@@ -7,7 +7,7 @@ import json
 import pytest
 
 from schemas.settings import Settings
-from transport.config import ZenohOptions, build_config, service_options
+from transport.config import ZenohOptions, build_config, reachable_from_network, service_options
 
 pytestmark = pytest.mark.timeout(10)
 
@@ -47,3 +47,68 @@ def test_build_config_sets_what_the_options_say() -> None:
         ZenohOptions(mode="client", listen=["tcp/0.0.0.0:1"], connect=["tcp/127.0.0.1:1"])
     )
     assert json.loads(client.get_json("listen/endpoints")) == []
+
+
+def test_security_settings_reach_the_config() -> None:
+    settings = Settings(
+        zenoh_listen="tls/127.0.0.1:7447",
+        zenoh_tls_certificate="s.pem",
+        zenoh_tls_private_key="s.key",
+        zenoh_tls_root_ca="ca.pem",
+        zenoh_tls_mtls=True,
+        zenoh_users_file="users",
+        zenoh_user="svc",
+        zenoh_password="pw",
+        zenoh_acl="robot1:lab:upload,viewer:*:read",
+    )
+    config = build_config(service_options(settings))
+    tls = json.loads(config.get_json("transport/link/tls"))
+    assert (tls["listen_certificate"], tls["listen_private_key"]) == ("s.pem", "s.key")
+    assert (tls["root_ca_certificate"], tls["enable_mtls"]) == ("ca.pem", True)
+    usrpwd = json.loads(config.get_json("transport/auth/usrpwd"))
+    assert usrpwd == {"user": "svc", "password": "pw", "dictionary_file": "users"}
+    acl = json.loads(config.get_json("access_control"))
+    assert acl["enabled"] and acl["default_permission"] == "deny"
+    # Known by certificate or by user name: one subject each, in the peer's one policy.
+    subjects = {s["id"]: s for s in acl["subjects"]}
+    assert subjects["robot1/cn"]["cert_common_names"] == ["robot1"]
+    assert subjects["robot1/user"]["usernames"] == ["robot1"]
+    rules = {r["id"]: r for r in acl["rules"]}
+    assert rules["robot1/upload/in"]["key_exprs"] == ["fpj/sites/lab/fragments/*"]
+    assert "robot1/read/in" not in rules
+    assert rules["viewer/read/out"]["key_exprs"] == ["fpj/sites/*/poses/*", "fpj/sites/*/result"]
+    assert "viewer/upload/in" not in rules
+    default = build_config(service_options(Settings()))
+    assert json.loads(default.get_json("access_control/enabled")) is False
+
+
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [
+        ({"zenoh_listen": "tls/127.0.0.1:7447"}, "_PRIVATE_KEY"),
+        (
+            {"zenoh_tls_mtls": True, "zenoh_tls_certificate": "c", "zenoh_tls_private_key": "k"},
+            "CA",
+        ),
+        ({"zenoh_user": "svc"}, "go together"),
+        ({"zenoh_acl": "robot1"}, "every peer is unknown"),
+        ({"zenoh_acl": "robot1:lab:write", "zenoh_users_file": "u"}, "rights"),
+        (
+            {"zenoh_acl": "r", "zenoh_users_file": "u", "zenoh_ros_pose_topic": "/p"},
+            "ROS 2",
+        ),
+    ],
+)
+def test_insecure_or_incomplete_security_settings_are_refused(
+    fields: dict[str, object], message: str
+) -> None:
+    with pytest.raises(ValueError, match=message):
+        Settings(**fields)  # type: ignore[arg-type]
+
+
+def test_endpoints_reachable_from_the_network() -> None:
+    assert not reachable_from_network("tcp/localhost:7447")
+    assert not reachable_from_network("unixsock-stream//tmp/zenoh.sock")
+    assert reachable_from_network("tcp/192.168.1.5:7447")
+    assert reachable_from_network("tcp/robots.example:7447")
+    assert not Settings().zenoh_secured

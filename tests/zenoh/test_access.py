@@ -1,4 +1,6 @@
-"""Who may do what over zenoh: scoped tokens on fragment and result queries (as over HTTP).
+"""Who may do what over zenoh: scoped tokens on fragment and result queries (as over HTTP),
+and zenoh's own authentication (mutual TLS, user names) with its access control
+(FPJ_ZENOH_ACL), with certificates generated for the test.
 
 The service is the app on uvicorn in this process (its lifespan opens the zenoh front end)
 on its own Redis key prefix, so it shares the database with the package's service without
@@ -8,16 +10,28 @@ touching its keys; robots are zenoh sessions of the test process on loopback.
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
+import httpx
+import numpy as np
 import pytest
 import redis
 import zenoh
 
 from store.keys import Keys
-from tests.service_fixtures import ApiServer, free_port, make_settings, ply_bytes
-from transport.config import ZenohOptions, build_config
+from tests.service_fixtures import (
+    ApiServer,
+    free_port,
+    make_settings,
+    ply_bytes,
+    wait_until,
+)
+from tests.zenoh.certs import Authority, CertFiles
+from transport.config import TlsOptions, ZenohOptions, build_config
 from transport.keys import ZenohKeys
 
 pytestmark = pytest.mark.timeout(60)
@@ -95,3 +109,146 @@ def test_tokens_scope_result_queries(robot: zenoh.Session, redis7_url: str) -> N
     # A wildcard gets the token's sites only.
     assert sorted(b["site"] for b in read("*", {"token": "viewer"})) == ["hall", "lab"]
     assert len(read("*", {"token": "admin"})) == 3
+
+
+# ---------------------------------------------------------------- TLS, authentication, ACL
+
+RESULT = {
+    "status": "closed",
+    "confidence": 0.9,
+    "fragments": [{"id": "f", "placed": True, "pose": np.eye(4).tolist(), "loop_index": 0}],
+}
+
+
+@dataclass
+class Secured:
+    """A service whose zenoh peers must authenticate, and robots' session options."""
+
+    endpoint: str
+    known: ZenohOptions  # in FPJ_ZENOH_ACL with upload and read on "lab"
+    unnamed: dict[str, ZenohOptions]  # zenoh refuses their session
+    unlisted: ZenohOptions  # authenticated, not in FPJ_ZENOH_ACL
+    cli: list[str]  # the known robot's credentials as options of jigsaw send
+
+
+def _mtls(tmp: Path, port: int) -> tuple[dict[str, Any], Secured]:
+    ca, other = Authority(tmp), Authority(tmp, "other-ca")
+    service = ca.issue("fpj-service", server=True)
+    endpoint = f"tls/127.0.0.1:{port}"
+    settings = {
+        "zenoh_listen": endpoint,
+        "zenoh_tls_certificate": service.certificate,
+        "zenoh_tls_private_key": service.private_key,
+        "zenoh_tls_root_ca": ca.certificate,
+        "zenoh_tls_mtls": True,
+    }
+
+    def robot(files: CertFiles | None, root: Path = ca.certificate) -> ZenohOptions:
+        cert, key = (files.certificate, files.private_key) if files else (None, None)
+        tls = TlsOptions(root_ca=root, certificate=cert, private_key=key, mtls=True)
+        return ZenohOptions(connect=[endpoint], tls=tls)
+
+    unnamed = {
+        "no client certificate": robot(None),
+        # The known robot's name, signed by another CA: a stranger cannot pass for it.
+        "another CA's certificate": robot(other.issue("robot1"), other.certificate),
+    }
+    known = ca.issue("robot1")
+    cli = ["--tls-ca", str(ca.certificate), "--tls-cert", str(known.certificate)]
+    cli += ["--tls-key", str(known.private_key)]
+    return settings, Secured(endpoint, robot(known), unnamed, robot(ca.issue("r2")), cli)
+
+
+def _usrpwd(tmp: Path, port: int) -> tuple[dict[str, Any], Secured]:
+    users = tmp / "users"
+    users.write_text("robot1:pw-1\nr2:pw-2\n")
+    endpoint = f"tcp/127.0.0.1:{port}"
+
+    def robot(user: str | None, password: str | None) -> ZenohOptions:
+        return ZenohOptions(connect=[endpoint], user=user, password=password)
+
+    unnamed = {"no credentials": robot(None, None), "a wrong password": robot("robot1", "pw-2")}
+    settings = {"zenoh_listen": endpoint, "zenoh_users_file": users}
+    cli = ["--user", "robot1", "--password", "pw-1"]
+    return settings, Secured(endpoint, robot("robot1", "pw-1"), unnamed, robot("r2", "pw-2"), cli)
+
+
+@pytest.fixture(params=["mtls", "usrpwd"])
+def secured(
+    request: pytest.FixtureRequest, redis7_url: str, tmp_path: Path
+) -> Iterator[tuple[Secured, httpx.Client, redis.Redis]]:
+    """The API (zenoh front end in this process) with FPJ_ZENOH_ACL: robot1 may upload to
+    and read "lab"; everything else is denied."""
+    build = _mtls if request.param == "mtls" else _usrpwd
+    overrides, secured = build(tmp_path, free_port())
+    acl = "robot1:lab:upload+read"
+    settings = make_settings(redis7_url, key_prefix=PREFIX, zenoh_acl=acl, **overrides)
+    server = ApiServer(settings).start()
+    client = redis.Redis.from_url(redis7_url)
+    try:
+        with server.client() as http:
+            yield secured, http, client
+    finally:
+        server.stop()
+        for key in client.scan_iter(f"{PREFIX}:*"):
+            client.delete(key)
+        client.close()
+
+
+def _attempt(options: ZenohOptions, client: redis.Redis) -> dict[str, Any]:
+    """Everything a robot may try: connect, query and put fragments of "lab", query its
+    result, subscribe to its result and poses while a result is published."""
+    with zenoh.open(build_config(options)) as session:
+        received: list[str] = []
+        subscribers = [
+            session.declare_subscriber(key, lambda s: received.append(str(s.key_expr)))
+            for key in (KEYS.result("lab"), KEYS.site_poses("lab"))
+        ]
+        connected = bool(list(session.info.peers_zid()))
+        replies = _replies(session, KEYS.fragment("lab", "f"), ply_bytes(300))
+        session.put(KEYS.fragment("lab", "p"), ply_bytes(300, seed=1))
+        results = _replies(session, KEYS.result("lab"), None)
+        envelope = json.dumps({"version": 1, "site_id": "lab", "generation": 1, "result": RESULT})
+        wait_until(lambda: client.publish(Keys(PREFIX).results_channel, envelope), 10)
+        if connected and replies:
+            wait_until(lambda: len(set(received)) == 2, 10)
+        else:
+            time.sleep(1.0)  # what would have come by now
+        for subscriber in subscribers:
+            subscriber.undeclare()
+    return {"connected": connected, "upload": replies, "result": results, "got": set(received)}
+
+
+def _replies(session: zenoh.Session, key: str, payload: bytes | None) -> list[Any]:
+    found = []
+    for reply in session.get(key, payload=payload, timeout=2):
+        sample = reply.ok if reply.ok is not None else reply.err
+        assert sample is not None
+        found.append(json.loads(sample.payload.to_bytes()))
+    return found
+
+
+def test_unknown_peers_can_neither_send_nor_read(
+    secured: tuple[Secured, httpx.Client, redis.Redis],
+) -> None:
+    robots, http, client = secured
+    client.set(Keys(PREFIX).result("lab"), json.dumps(RESULT))
+    nothing: dict[str, Any] = {"upload": [], "result": [], "got": set()}
+    for why, options in robots.unnamed.items():
+        assert _attempt(options, client) == {"connected": False, **nothing}, why
+    # Authenticated, but FPJ_ZENOH_ACL gives it nothing: connected, every message dropped.
+    assert _attempt(robots.unlisted, client) == {"connected": True, **nothing}
+    assert http.get("/v1/sites/lab").status_code == 404  # no fragment was stored
+
+    known = _attempt(robots.known, client)
+    assert known["connected"] and known["result"] == [RESULT]
+    assert [(r["fragment_id"], r["created"]) for r in known["upload"]] == [("f", True)]
+    assert known["got"] == {KEYS.result("lab"), KEYS.pose("lab", "f")}
+
+    def stored() -> set[str]:
+        return {f["fragment_id"] for f in http.get("/v1/sites/lab").json()["fragments"]}
+
+    wait_until(lambda: stored() == {"f", "p"}, 10, describe=lambda: str(stored()))
+    # Its rights stop at its site: another site's fragments are dropped.
+    with zenoh.open(build_config(robots.known)) as session:
+        assert _replies(session, KEYS.fragment("hall", "f"), ply_bytes(300)) == []
