@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
@@ -235,6 +236,33 @@ ScoutOpt = Annotated[bool, typer.Option("--scout", help="find the service by UDP
 PrefixOpt = Annotated[str, typer.Option(help="key expression prefix of the service")]
 TokenOpt = Annotated[str | None, typer.Option(help="bearer token, if the service needs one")]
 TimeoutOpt = Annotated[float, typer.Option(help="seconds to wait for the service and replies")]
+TlsCaOpt = Annotated[
+    Path | None,
+    typer.Option("--tls-ca", help="PEM certificate of the CA that signed the service's (tls/)"),
+]
+TlsCertOpt = Annotated[
+    Path | None,
+    typer.Option("--tls-cert", help="this robot's PEM certificate, for a service with mutual TLS"),
+]
+TlsKeyOpt = Annotated[Path | None, typer.Option("--tls-key", help="its PEM private key")]
+UserOpt = Annotated[
+    str | None, typer.Option("--user", help="zenoh user name, for a service that checks one")
+]
+PasswordOpt = Annotated[
+    str | None,
+    typer.Option("--password", envvar="FPJ_ZENOH_PASSWORD", help="the user's zenoh password"),
+]
+
+
+@dataclass(frozen=True)
+class _Credentials:
+    """How a robot authenticates to a service whose zenoh peers must (README, Zenoh security)."""
+
+    tls_ca: Path | None = None
+    tls_cert: Path | None = None
+    tls_key: Path | None = None
+    user: str | None = None
+    password: str | None = None
 
 
 def _robot_options(
@@ -245,10 +273,16 @@ def _robot_options(
     robot: str | None,
     token: str | None,
     timeout: float,
+    credentials: _Credentials,
 ) -> RobotOptions:
     """The robot-side zenoh options shared by ``send`` and ``watch``."""
     from robot.client import robot_options
+    from transport.config import TlsOptions
 
+    c = credentials
+    if (c.tls_cert is None) != (c.tls_key is None):
+        raise typer.BadParameter("--tls-cert and --tls-key go together")
+    tls = TlsOptions(c.tls_ca, c.tls_cert, c.tls_key, mtls=c.tls_cert is not None)
     return robot_options(
         connect or ["tcp/127.0.0.1:7447"],
         mode=mode,
@@ -257,6 +291,9 @@ def _robot_options(
         robot_id=robot,
         token=token,
         timeout=timeout,
+        tls=tls if tls != TlsOptions() else None,
+        user=c.user,
+        password=c.password,
     )
 
 
@@ -271,6 +308,11 @@ def send(
     prefix: PrefixOpt = "fpj",
     token: TokenOpt = None,
     timeout: TimeoutOpt = 60.0,
+    tls_ca: TlsCaOpt = None,
+    tls_cert: TlsCertOpt = None,
+    tls_key: TlsKeyOpt = None,
+    user: UserOpt = None,
+    password: PasswordOpt = None,
     prior: Annotated[
         Path | None,
         typer.Option(
@@ -296,7 +338,8 @@ def send(
         except OptionFileError as exc:
             typer.echo(exc.message, err=True)
             raise typer.Exit(2) from exc
-    options = _robot_options(connect, mode, scout, prefix, robot, token, timeout)
+    credentials = _Credentials(tls_ca, tls_cert, tls_key, user, password)
+    options = _robot_options(connect, mode, scout, prefix, robot, token, timeout, credentials)
     raise typer.Exit(send_fragments(options, site, files, sys.stdout, sys.stderr, prior=known))
 
 
@@ -313,13 +356,19 @@ def watch(
     prefix: PrefixOpt = "fpj",
     token: TokenOpt = None,
     timeout: TimeoutOpt = 60.0,
+    tls_ca: TlsCaOpt = None,
+    tls_cert: TlsCertOpt = None,
+    tls_key: TlsKeyOpt = None,
+    user: UserOpt = None,
+    password: PasswordOpt = None,
 ) -> None:
     """Print the site's pose updates over zenoh as they arrive (one JSON per line)."""
     import sys
 
     from robot.client import watch_poses
 
-    options = _robot_options(connect, mode, scout, prefix, robot, token, timeout)
+    credentials = _Credentials(tls_ca, tls_cert, tls_key, user, password)
+    options = _robot_options(connect, mode, scout, prefix, robot, token, timeout, credentials)
     code = watch_poses(
         options, site, sys.stdout, sys.stderr, count=count, duration=duration, latest=latest
     )

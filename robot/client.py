@@ -30,7 +30,7 @@ from schemas.result import ResultModel
 from schemas.service import ErrorBody, ErrorDetail
 from schemas.zenoh import ServiceInfo, pose_updates
 from services.errors import FragmentTooLargeError
-from transport.config import Mode, ZenohOptions, build_config
+from transport.config import Mode, TlsOptions, ZenohOptions, build_config
 from transport.keys import ZenohKeys
 
 __all__ = ["RobotOptions", "robot_options", "send_fragments", "watch_poses"]
@@ -72,8 +72,12 @@ def robot_options(
     robot_id: str | None = None,
     token: str | None = None,
     timeout: float = 60.0,
+    tls: TlsOptions | None = None,
+    user: str | None = None,
+    password: str | None = None,
 ) -> RobotOptions:
-    """Options of a robot-side command (``connect`` items may be comma-separated).
+    """Options of a robot-side command (``connect`` items may be comma-separated); ``tls``,
+    ``user`` and ``password`` for a service whose zenoh peers must authenticate.
 
     Raises
     ------
@@ -83,7 +87,14 @@ def robot_options(
     if mode not in ("peer", "client"):
         raise ValueError(f"a robot's zenoh mode is peer or client, not {mode!r}")
     endpoints = [part.strip() for item in connect for part in item.split(",") if part.strip()]
-    session = ZenohOptions(mode=cast(Mode, mode), connect=endpoints, multicast_scouting=scout)
+    session = ZenohOptions(
+        mode=cast(Mode, mode),
+        connect=endpoints,
+        multicast_scouting=scout,
+        tls=tls,
+        user=user,
+        password=password,
+    )
     return RobotOptions(session, prefix, robot_id, token, timeout)
 
 

@@ -10,6 +10,8 @@ touching its keys; robots are zenoh sessions of the test process on loopback.
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -24,10 +26,12 @@ import zenoh
 
 from store.keys import Keys
 from tests.service_fixtures import (
+    ROOT,
     ApiServer,
     free_port,
     make_settings,
     ply_bytes,
+    settings_env,
     wait_until,
 )
 from tests.zenoh.certs import Authority, CertFiles
@@ -252,3 +256,18 @@ def test_unknown_peers_can_neither_send_nor_read(
     # Its rights stop at its site: another site's fragments are dropped.
     with zenoh.open(build_config(robots.known)) as session:
         assert _replies(session, KEYS.fragment("hall", "f"), ply_bytes(300)) == []
+
+
+def test_the_robot_command_authenticates(
+    secured: tuple[Secured, httpx.Client, redis.Redis], tmp_path: Path
+) -> None:
+    robots, http, _ = secured
+    scan = tmp_path / "g.ply"
+    scan.write_bytes(ply_bytes(300, seed=2))
+    command = [sys.executable, "-m", "cli.main", "send", str(scan), "--site", "lab"]
+    command += ["--connect", robots.endpoint, "--mode", "client", "--timeout", "10", *robots.cli]
+    env = settings_env(make_settings(None))
+    sent = subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True, timeout=40)
+    assert sent.returncode == 0, sent.stderr
+    assert json.loads(sent.stdout)["fragment_id"] == "g"
+    assert [f["fragment_id"] for f in http.get("/v1/sites/lab").json()["fragments"]] == ["g"]
