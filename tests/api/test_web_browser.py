@@ -14,7 +14,7 @@ import math
 import re
 import shutil
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +29,8 @@ from tests.conftest import small_scene
 from tests.service_fixtures import (
     ROOT,
     ApiServer,
+    make_settings,
+    ply_bytes,
 )
 
 pytestmark = pytest.mark.timeout(90)
@@ -253,3 +255,29 @@ def test_docs_render_offline(server: ApiServer, browser: Any) -> None:
     }
     assert "/v1/sites/{site_id}/fragments/{fragment_id}" in paths
     _shot(browser, "05-docs.png")
+
+
+def test_a_scoped_token_sees_its_sites_only(
+    redis_url: str, api_factory: Callable[..., ApiServer], browser: Any
+) -> None:
+    server = api_factory(make_settings(redis_url, tokens="admin,viewer:lab:read"))
+    with server.client(headers={"Authorization": "Bearer admin"}) as http:
+        for site in ("lab", "yard"):
+            put = http.put(f"/v1/sites/{site}/fragments/a", content=ply_bytes(300))
+            assert put.status_code == 202, put.text
+    browser.get(f"{server.url}/?token=viewer")  # the page keeps the token
+    _wait(
+        browser,
+        lambda d: d.find_elements(By.CSS_SELECTOR, '#sites tr[data-site="lab"]'),
+        10,
+        "the token's site is listed",
+    )
+    assert not browser.find_elements(By.CSS_SELECTOR, '#sites tr[data-site="yard"]')
+    browser.get(f"{server.url}/sites/yard")
+    _wait(
+        browser,
+        lambda d: "may not do that on this site" in _text(d, "token-note"),
+        10,
+        "the page says the token has no right on this site",
+    )
+    _shot(browser, "05-scoped-token.png")

@@ -34,8 +34,17 @@ const FPJ = (() => {
     const headers = new Headers(options.headers || {});
     if (token()) headers.set("Authorization", `Bearer ${token()}`);
     const reply = await fetch(url(path), { ...options, headers });
-    if (reply.status === 401 || reply.status === 403) onAuthProblem(reply.status);
+    if (reply.status === 401 || reply.status === 403) onAuthProblem(await errorCode(reply));
     return reply;
+  }
+
+  // The error code of a reply, read from a copy so that the caller can still read the body.
+  async function errorCode(reply) {
+    try {
+      return (await reply.clone().json()).error.code;
+    } catch {
+      return `HTTP ${reply.status}`;
+    }
   }
 
   // EventSource cannot send headers: the token goes as ?access_token=, which the service
@@ -123,9 +132,14 @@ const FPJ = (() => {
       form.hidden = true;
       onSaved();
     });
-    onAuthProblem = (status) => {
+    const problems = {
+      unauthorized: "this service needs a token",
+      forbidden: "the token was refused",
+      insufficient_scope: "this token may not do that on this site (its sites and rights)",
+    };
+    onAuthProblem = (code) => {
       form.hidden = false;
-      note.textContent = status === 401 ? "this service needs a token" : "the token was refused";
+      note.textContent = problems[code] || `the token was refused (${code})`;
     };
   }
 
