@@ -41,6 +41,7 @@ class TlsOptions:
     mtls: bool = False
 
     def section(self) -> dict[str, Any]:
+        """The ``transport/link/tls`` section of zenoh's config (this side's files, both ways)."""
         tls: dict[str, Any] = {"enable_mtls": self.mtls}
         if self.root_ca is not None:
             tls["root_ca_certificate"] = str(self.root_ca)
