@@ -38,8 +38,13 @@ __all__ = [
     "InvalidPriorError",
     "LayoutNotFoundError",
     "NotFoundError",
+    "ProcessingTimeoutError",
+    "RateLimitedError",
+    "RequestTimeoutError",
     "ServiceError",
     "SiteNotFoundError",
+    "StorageFullError",
+    "TooManyFragmentsError",
     "UnauthorizedError",
     "UnavailableError",
     "check_id",
@@ -47,6 +52,7 @@ __all__ = [
     "error_responses",
     "install_error_handlers",
     "status_for",
+    "storage_error",
 ]
 
 log = logging.getLogger(__name__)
@@ -118,6 +124,37 @@ class ConflictError(ServiceError):
     code = "conflict"
 
 
+class TooManyFragmentsError(ServiceError):
+    """The site already holds ``max_fragments_per_site`` fragments."""
+
+    code = "too_many_fragments"
+
+
+class RateLimitedError(ServiceError):
+    """More uploads than ``upload_rate_limit`` in the current window; retry after
+    ``retry_after`` seconds."""
+
+    code = "rate_limited"
+
+    def __init__(self, message: str, retry_after: int) -> None:
+        super().__init__(message)
+        self.retry_after = retry_after
+
+
+class RequestTimeoutError(ServiceError):
+    """The request's body was still arriving after ``request_timeout_s``."""
+
+    code = "request_timeout"
+
+
+class StorageFullError(ServiceError):
+    """Redis refuses writes: its maxmemory is reached (``OOM``), or its data directory's disk
+    is full (``MISCONF``, the append-only file cannot be written). Nothing stored is lost;
+    reads and deletes still work."""
+
+    code = "storage_full"
+
+
 class UnauthorizedError(ServiceError):
     """No token where tokens are configured."""
 
@@ -142,20 +179,30 @@ class UnavailableError(ServiceError):
     code = "unavailable"
 
 
+class ProcessingTimeoutError(UnavailableError):
+    """The whole request arrived, but no answer started within ``request_timeout_s``."""
+
+    code = "processing_timeout"
+
+
 # The one mapping. The most specific class in an error's MRO decides.
 _STATUS: dict[type[JigsawError], int] = {
     InvalidIdError: 400,
     UnauthorizedError: 401,
     ForbiddenError: 403,
     NotFoundError: 404,
+    RequestTimeoutError: 408,
     ConflictError: 409,
+    TooManyFragmentsError: 409,
     FragmentTooLargeError: 413,
     HintsTooLargeError: 413,
     UnsupportedFormatError: 415,
     InvalidFragmentError: 422,
     FragmentError: 422,
     InvalidHintsError: 422,
+    RateLimitedError: 429,
     UnavailableError: 503,
+    StorageFullError: 507,
 }
 
 _DESCRIPTIONS = {
@@ -164,13 +211,18 @@ _DESCRIPTIONS = {
     403: "unknown bearer token (forbidden), or one without this right on this site "
     "(insufficient_scope)",
     404: "unknown site or fragment, no hints stored, or nothing placed to export",
-    409: "different bytes already stored under this fragment id",
+    408: "the request body was still arriving after FPJ_REQUEST_TIMEOUT_S",
+    409: "different bytes already stored under this fragment id (conflict), or the site "
+    "already holds FPJ_MAX_FRAGMENTS_PER_SITE fragments (too_many_fragments)",
     413: "body too large (bytes or points; an archive with too many or too large entries)",
     415: "not a PLY or PCD file, nor an RGB-D frame's zip archive",
     422: "invalid content: empty, truncated, malformed, too few finite points; a hostile or "
     "truncated archive, a depth image not 16-bit single-channel or all zero, intrinsics "
     "missing or not matching, colour of another size; invalid hints",
-    503: "Redis unreachable; retry later",
+    429: "more uploads than FPJ_UPLOAD_RATE_LIMIT in the window; retry after Retry-After s",
+    503: "Redis unreachable, or no answer within FPJ_REQUEST_TIMEOUT_S; retry later",
+    507: "storage full (Redis maxmemory, or its data directory's disk): nothing stored is "
+    "lost; delete sites or add room, then retry",
 }
 
 
@@ -199,20 +251,39 @@ def error_responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
     return {s: {"model": ErrorBody, "description": _DESCRIPTIONS[s]} for s in statuses}
 
 
-def _headers(status: int) -> dict[str, str] | None:
+def _headers(exc: JigsawError, status: int) -> dict[str, str] | None:
     if status == 401:
         return {"WWW-Authenticate": "Bearer"}
+    if isinstance(exc, RateLimitedError):
+        return {"Retry-After": str(exc.retry_after)}
     if status == 503:
         return {"Retry-After": "1"}
+    return None
+
+
+def storage_error(exc: redis.exceptions.RedisError) -> JigsawError | None:
+    """The service error of a Redis failure: StorageFullError for a refused write (maxmemory
+    reached, or the append-only file's disk full), UnavailableError for an unreachable Redis;
+    None for anything else (a bug, answered 500)."""
+    # A pipeline's error reads "Command # 1 (...) of pipeline caused error: <Redis' reply>",
+    # the reply sometimes as a tuple's repr ("('MISCONF ...',)").
+    text = str(exc).rpartition("of pipeline caused error: ")[2].lstrip("('\"")
+    if isinstance(exc, redis.exceptions.OutOfMemoryError):
+        return StorageFullError(f"storage full: Redis maxmemory reached ({text})")
+    if text.startswith("MISCONF"):
+        return StorageFullError(f"storage full: Redis cannot persist writes ({text})")
+    if isinstance(exc, (redis.exceptions.ConnectionError, redis.exceptions.TimeoutError)):
+        return UnavailableError(f"storage unavailable: {type(exc).__name__}: {exc}")
     return None
 
 
 def jigsaw_response(exc: JigsawError) -> JSONResponse:
     status = status_for(exc)
     if status >= 500:
-        log.log(logging.INFO if status == 503 else logging.ERROR, "%s: %s", exc.code, exc.message)
+        quiet = status in (503, 507)  # the service works; its storage needs an operator
+        log.log(logging.INFO if quiet else logging.ERROR, "%s: %s", exc.code, exc.message)
     body = error_body(exc.code, exc.message)
-    return JSONResponse(body, status_code=status, headers=_headers(status))
+    return JSONResponse(body, status_code=status, headers=_headers(exc, status))
 
 
 async def _on_jigsaw(request: Request, exc: Exception) -> JSONResponse:
@@ -220,8 +291,12 @@ async def _on_jigsaw(request: Request, exc: Exception) -> JSONResponse:
     return jigsaw_response(exc)
 
 
-async def _on_redis_down(request: Request, exc: Exception) -> JSONResponse:
-    return jigsaw_response(UnavailableError(f"storage unavailable: {type(exc).__name__}: {exc}"))
+async def _on_redis_error(request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, redis.exceptions.RedisError)
+    mapped = storage_error(exc)
+    if mapped is None:
+        return await _on_unexpected(request, exc)
+    return jigsaw_response(mapped)
 
 
 async def _on_validation(request: Request, exc: Exception) -> JSONResponse:
@@ -244,8 +319,7 @@ async def _on_unexpected(request: Request, exc: Exception) -> JSONResponse:
 def install_error_handlers(app: FastAPI) -> None:
     """Register the handlers that turn every failure into the contract's error body."""
     app.add_exception_handler(JigsawError, _on_jigsaw)
-    app.add_exception_handler(redis.exceptions.ConnectionError, _on_redis_down)
-    app.add_exception_handler(redis.exceptions.TimeoutError, _on_redis_down)
+    app.add_exception_handler(redis.exceptions.RedisError, _on_redis_error)
     app.add_exception_handler(RequestValidationError, _on_validation)
     app.add_exception_handler(StarletteHTTPException, _on_http)
     app.add_exception_handler(Exception, _on_unexpected)

@@ -17,7 +17,7 @@ from collections.abc import Mapping
 
 import redis
 
-from api.errors import ConflictError, check_id
+from api.errors import ConflictError, TooManyFragmentsError, check_id
 from api.metrics import UPLOAD_BYTES, UPLOADS
 from api.site_data import touch_site
 from schemas.jobs import FragmentState, LayoutJob, encode_job
@@ -59,6 +59,8 @@ async def ingest_fragment(
         Bad input; nothing is stored.
     ConflictError
         Different bytes are already stored under ``fragment_id``.
+    TooManyFragmentsError
+        The site already holds ``max_fragments_per_site`` fragments.
     redis.exceptions.ConnectionError
         Redis unreachable (the HTTP front end answers 503).
     """
@@ -101,7 +103,8 @@ async def _ingest(backend: Backend, site_id: str, fragment_id: str, data: bytes)
     if existing:
         return _same_or_conflict(site_id, fragment_id, sha, existing)
     params = backend.settings.pipeline_params()
-    parsed: Fragment = await asyncio.to_thread(decode_upload, data, params)
+    limits = backend.settings.archive_limits()
+    parsed: Fragment = await asyncio.to_thread(decode_upload, data, params, limits)
     blob = await asyncio.to_thread(compress, data, backend.settings.compress_level)
     fields = new_fragment_record(
         sha256=sha,
@@ -151,24 +154,42 @@ def _reply(
 
 
 async def _store_new(backend: Backend, job: LayoutJob, fields: dict[str, str], blob: bytes) -> bool:
-    """Store a new fragment and enqueue its job, unless the id got taken meanwhile."""
+    """Store a new fragment and enqueue its job, unless the id got taken meanwhile.
+
+    Raises TooManyFragmentsError when the site is full. The site's fragment list is watched
+    too (so concurrent uploads cannot pass the limit together): when another fragment of
+    the site lands first, this one tries again.
+    """
+    while True:
+        try:
+            return await _try_store_new(backend, job, fields, blob)
+        except redis.WatchError:
+            continue
+
+
+async def _try_store_new(
+    backend: Backend, job: LayoutJob, fields: dict[str, str], blob: bytes
+) -> bool:
     keys, site_id, fid = backend.keys, job.site_id, job.fragment_id
-    fragment = keys.fragment(site_id, fid)
+    fragment, fragments = keys.fragment(site_id, fid), keys.fragments(site_id)
+    limit = backend.settings.max_fragments_per_site
     now = float(fields["created_at"])
     async with backend.redis.pipeline(transaction=True) as pipe:
-        try:
-            await pipe.watch(fragment)
-            if await pipe.exists(fragment):
-                await abort_watch(pipe)
-                return False
-            begin_multi(pipe)
-            pipe.hset(fragment, mapping=hash_fields(fields))
-            pipe.set(keys.fragment_data(site_id, fid), blob)
-            pipe.delete(keys.fragment_layout(site_id, fid))
-            pipe.zadd(keys.fragments(site_id), {fid: now}, nx=True)
-            touch_site(pipe, keys, site_id, now)
-            pipe.xadd(keys.jobs, {"job": encode_job(job)})
-            await pipe.execute()
-        except redis.WatchError:
+        await pipe.watch(fragment, fragments)
+        if await pipe.exists(fragment):
+            await abort_watch(pipe)
             return False
+        if await pipe.zcard(fragments) >= limit:
+            await abort_watch(pipe)
+            raise TooManyFragmentsError(
+                f"site {site_id!r} already holds {limit} fragments, the most it may hold"
+            )
+        begin_multi(pipe)
+        pipe.hset(fragment, mapping=hash_fields(fields))
+        pipe.set(keys.fragment_data(site_id, fid), blob)
+        pipe.delete(keys.fragment_layout(site_id, fid))
+        pipe.zadd(keys.fragments(site_id), {fid: now}, nx=True)
+        touch_site(pipe, keys, site_id, now)
+        pipe.xadd(keys.jobs, {"job": encode_job(job)})
+        await pipe.execute()
     return True

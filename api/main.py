@@ -9,6 +9,7 @@ from fastapi import Depends, FastAPI
 
 from api.deps import require_stream_token, require_token
 from api.errors import install_error_handlers
+from api.limits import RequestTimeout
 from api.routers import events, fragments, health, hints, metrics, sites
 from api.routers.web import install_web
 from api.zenoh import zenoh_front_end
@@ -56,6 +57,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         redoc_url=None,
     )
     install_error_handlers(app)
+    app.add_middleware(RequestTimeout, seconds=settings.request_timeout_s)
     auth = [Depends(require_token)]
     app.include_router(health.router)
     app.include_router(metrics.router, dependencies=auth)

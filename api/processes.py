@@ -83,9 +83,12 @@ class EmbeddedRedis:
     It listens on a Unix socket only (no TCP port to collide with or expose).
     """
 
-    def __init__(self, data_dir: Path, binary: str | None = None) -> None:
+    def __init__(
+        self, data_dir: Path, binary: str | None = None, maxmemory: int | None = None
+    ) -> None:
         self.dir = (data_dir / "redis").resolve()
         self.binary = find_redis_server(binary)
+        self.maxmemory = maxmemory
         self._socket_dir = ""
         self._lock_fd = -1
         self.process: subprocess.Popen[bytes] | None = None
@@ -115,6 +118,8 @@ class EmbeddedRedis:
             *("--unixsocketperm", "700", "--dir", str(self.dir), "--daemonize", "no"),
             *("--appendonly", "yes", "--appendfsync", "everysec", "--save", ""),
             *("--logfile", str(self.dir / "redis.log")),
+            # Full, it refuses writes (507 storage_full) and never evicts a stored fragment.
+            *("--maxmemory", str(self.maxmemory or 0), "--maxmemory-policy", "noeviction"),
         ]
         self.process = subprocess.Popen(
             command,

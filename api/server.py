@@ -43,7 +43,9 @@ def _start_backing(settings: Settings, stack: ExitStack) -> Settings:
     """Start the embedded Redis and local workers as configured; returns settings with URL."""
     count = settings.local_worker_count()  # before the URL is filled in: 2 when embedded
     if settings.embedded:
-        embedded = EmbeddedRedis(settings.data_dir, settings.redis_binary)
+        embedded = EmbeddedRedis(
+            settings.data_dir, settings.redis_binary, maxmemory=settings.max_stored_bytes
+        )
         stack.callback(embedded.stop)
         settings = settings.model_copy(update={"redis_url": embedded.start()})
     if count:

@@ -179,6 +179,13 @@ async def delete_site(backend: Backend, site_id: str) -> None:
                 break
             except redis.WatchError:
                 continue
+            except redis.exceptions.OutOfMemoryError:
+                # Full (maxmemory), Redis refuses every command inside MULTI, and deleting is
+                # how room is made. No upload can land meanwhile (each needs MULTI), so the
+                # plain commands are safe; DEL of all keys is itself atomic.
+                await r.delete(*keys.site_keys(site_id, ids))
+                await r.zrem(keys.sites, site_id)
+                break
     event = site_event("site", site_id, {"deleted": True})
     await r.publish(keys.site_channel(site_id), event)
 

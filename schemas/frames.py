@@ -109,3 +109,14 @@ class ArchiveLimits(BaseModel):
     max_total_bytes: int = Field(
         128 * 1024 * 1024, ge=1, description="largest uncompressed total, bytes"
     )
+    max_ratio: float = Field(
+        100.0, ge=1, description="largest uncompressed / compressed size (above ratio_floor)"
+    )
+    ratio_floor: int = Field(
+        1024 * 1024, ge=0, description="uncompressed bytes any archive may reach, at any ratio"
+    )
+
+    def budget(self, compressed: int) -> int:
+        """Uncompressed bytes an archive of ``compressed`` bytes may inflate to."""
+        by_ratio = max(int(compressed * self.max_ratio), self.ratio_floor)
+        return min(self.max_total_bytes, by_ratio)

@@ -17,6 +17,7 @@ from pydantic import Field, SecretStr, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from schemas.access import Scope, parse_scopes
+from schemas.frames import ArchiveLimits
 from schemas.ids import is_valid_id
 from schemas.params import ParserLimits, PipelineParams
 
@@ -86,6 +87,40 @@ class Settings(BaseSettings):
         "(SITES and RIGHTS +-separated or *, rights read, upload, delete; a bare token: every "
         "right on every site), a JSON list of those, or a JSON object {TOKEN: {sites, "
         "rights}}; empty: no auth",
+    )
+
+    # Limits: what one client or site may take (refused with 429, 409, 507 or 408).
+    upload_rate_limit: int = Field(
+        600,
+        ge=0,
+        description="uploads per upload_rate_window_s per bearer token (without one: per "
+        "client address over HTTP, per robot id over zenoh); 0: no limit",
+    )
+    upload_rate_window_s: float = Field(60.0, gt=0, description="window of upload_rate_limit")
+    max_fragments_per_site: int = Field(1000, ge=1, description="fragments one site may hold")
+    max_stored_bytes: int | None = Field(
+        None,
+        ge=8 * 1024 * 1024,
+        description="maxmemory of the embedded Redis, which holds every stored byte (unset: "
+        "no limit); past it uploads get 507 storage_full, never evicted data. With "
+        "FPJ_REDIS_URL the operator sets maxmemory; the service requires maxmemory-policy "
+        "noeviction there",
+    )
+    max_archive_bytes: int = Field(
+        128 * 1024 * 1024, ge=1, description="largest uncompressed total of an RGB-D frame's zip"
+    )
+    max_archive_ratio: float = Field(
+        100.0,
+        ge=1,
+        description="largest uncompressed / compressed size of a zip over 1 MiB uncompressed "
+        "(frames hold PNGs, which deflate barely shrinks; a zip bomb shrinks a thousandfold)",
+    )
+    request_timeout_s: float = Field(
+        300.0,
+        gt=0,
+        description="longest time from a request's arrival to the start of its response, "
+        "body upload included (408 while the body is still arriving, else 503); an event "
+        "stream, once started, runs on",
     )
 
     # Workers and queue.
@@ -347,6 +382,15 @@ class Settings(BaseSettings):
     def parser_limits(self) -> ParserLimits:
         """The parser bounds of this deployment."""
         return ParserLimits(min_points=self.min_points, max_points=self.max_points)
+
+    def archive_limits(self) -> ArchiveLimits:
+        """Bounds on an RGB-D frame's zip archive."""
+        entry = min(self.max_archive_bytes, ArchiveLimits().max_entry_bytes)
+        return ArchiveLimits(
+            max_entry_bytes=entry,
+            max_total_bytes=self.max_archive_bytes,
+            max_ratio=self.max_archive_ratio,
+        )
 
     def pipeline_params(self) -> PipelineParams:
         """Algorithm parameters: the paper's defaults with this deployment's parser limits."""

@@ -2,10 +2,11 @@
 
 The archive is untrusted: it is refused when truncated or not a zip, when it nests archives
 or folders, names a path with ``..`` or an absolute path, repeats a name, or uses a
-compression other than stored/deflate; and when it has too many entries or entries too large
-uncompressed. Sizes are checked on the declared values first and again while inflating
-(a lying header cannot inflate past the cap). :func:`decode_upload` is the one decoder of
-upload bytes for every front end (HTTP, zenoh, workers, CLI).
+compression other than stored/deflate; and when it has too many entries, entries too large
+uncompressed, or would inflate to many times its own size (a zip bomb). Sizes are checked on
+the declared values first and again while inflating (a lying header cannot inflate past the
+cap). :func:`decode_upload` is the one decoder of upload bytes for every front end (HTTP,
+zenoh, workers, CLI).
 """
 
 from __future__ import annotations
@@ -85,17 +86,20 @@ def read_frame_archive(data: bytes, limits: ArchiveLimits = _LIMITS) -> dict[str
             raise ArchiveTooLargeError(
                 f"archive has {len(infos)} entries, more than {limits.max_entries}"
             )
+        # The budget also bounds the expansion ratio: a few kilobytes may not become 128 MiB.
+        budget = limits.budget(len(data))
         declared = sum(info.file_size for info in infos)
-        if declared > limits.max_total_bytes:
+        if declared > budget:
             raise ArchiveTooLargeError(
-                f"archive declares {declared} bytes uncompressed, more than "
-                f"{limits.max_total_bytes}"
+                f"archive of {len(data)} bytes declares {declared} bytes uncompressed, more "
+                f"than {budget} (at most {limits.max_total_bytes}, and {limits.max_ratio:g} "
+                f"times its size above {limits.ratio_floor})"
             )
-        return _members(archive, infos, limits)
+        return _members(archive, infos, limits, budget)
 
 
 def _members(
-    archive: zipfile.ZipFile, infos: list[zipfile.ZipInfo], limits: ArchiveLimits
+    archive: zipfile.ZipFile, infos: list[zipfile.ZipInfo], limits: ArchiveLimits, budget: int
 ) -> dict[str, bytes]:
     files: dict[str, bytes] = {}
     folders = set()
@@ -114,7 +118,7 @@ def _members(
             raise InvalidArchiveError(f"archive entry {info.filename[:80]!r}: unsupported method")
         if name.lower() in files:
             raise InvalidArchiveError(f"archive holds {name!r} twice")
-        cap = min(limits.max_entry_bytes, limits.max_total_bytes - total)
+        cap = min(limits.max_entry_bytes, budget - total)
         try:
             content = _inflate(archive, info, cap)
         except (

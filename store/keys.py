@@ -25,6 +25,7 @@ P:site:S:senders          hash    fragment id -> SenderRecord JSON (zenoh robot,
 P:results                 pubsub  ``{"site_id", "generation", "result"}`` per placement
 P:presence                zset    zenoh front end id -> last presence refresh (unix time)
 P:presence:Z              hash    robot id -> connected since, as seen by front end Z (TTL)
+P:rate:C:W                string  uploads of client C (hashed token or address) in window W
 ========================  ======  =======================================================
 
 A site exists while its hash ``P:site:S`` does (created with its entry in ``P:sites``);
@@ -121,6 +122,9 @@ class Keys:
                 self.fragment_layout(site_id, fid),
             ]
         return names
+
+    def upload_rate(self, client_id: str, window: int) -> str:
+        return f"{self.prefix}:rate:{client_id}:{window}"
 
     @property
     def presence_fronts(self) -> str:

@@ -107,10 +107,11 @@ def redis_snapshot(client: Any) -> dict[str, Any]:
     """Everything stored (a client with string replies), comparable before and after.
 
     The workers' heartbeat registry is left out: it is liveness, not data, and it changes
-    every few seconds on its own."""
+    every few seconds on its own; so are the upload rate counters (every upload, even a
+    refused one, counts against its sender)."""
     state: dict[str, Any] = {}
     for key in sorted(client.scan_iter()):
-        if key.endswith(":workers"):
+        if key.endswith(":workers") or ":rate:" in key:
             continue
         kind = client.type(key)
         if kind == "hash":
@@ -344,8 +345,8 @@ class RedisProcess:
     """A redis-server (7.x from PATH) on a free TCP port with its AOF in ``directory``;
     stopped and restarted by fault tests."""
 
-    def __init__(self, directory: Path, binary: str = "redis-server") -> None:
-        self.directory, self.binary = directory, binary
+    def __init__(self, directory: Path, binary: str = "redis-server", *options: str) -> None:
+        self.directory, self.binary, self.options = directory, binary, options
         self.port = free_port()
         self.process: subprocess.Popen[bytes] | None = None
 
@@ -360,6 +361,7 @@ class RedisProcess:
                 *("--port", str(self.port), "--bind", "127.0.0.1", "--dir", str(self.directory)),
                 *("--appendonly", "yes", "--save", "", "--daemonize", "no"),
                 *("--logfile", str(self.directory / "redis.log")),
+                *self.options,
             ]
         )
         client = redis.Redis.from_url(self.url, socket_timeout=1)

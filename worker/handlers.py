@@ -100,7 +100,7 @@ class LayoutHandler:
         blob = ctx.raw.get(ctx.keys.fragment_data(site, fid))
         if not isinstance(blob, bytes):
             return {"outcome": "stale"}
-        parsed = decode_upload(zlib.decompress(blob), ctx.params)
+        parsed = decode_upload(zlib.decompress(blob), ctx.params, ctx.settings.archive_limits())
         progress = Progress(ctx, site, (fid, sha))
         layout = fragment_layout(parsed, ctx.params, progress=progress)
         wire = layout_to_wire(layout).model_dump_json()

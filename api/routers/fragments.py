@@ -9,6 +9,7 @@ from api.body import openapi_body, read_limited
 from api.deps import BackendDep, ExistingSite, FragmentId, SiteId
 from api.errors import error_responses
 from api.ingest import ingest_fragment
+from api.limits import check_upload_rate, http_client_id
 from api.site_data import delete_fragment, load_fragment
 from schemas.service import FragmentStatus, UploadReply
 
@@ -32,13 +33,14 @@ _BODY = openapi_body(
     responses={
         200: {"model": UploadReply, "description": "identical bytes already stored (no-op)"},
         202: {"model": UploadReply, "description": "accepted; its layout job is queued"},
-        **error_responses(400, 401, 403, 409, 413, 415, 422, 503),
+        **error_responses(400, 401, 403, 408, 409, 413, 415, 422, 429, 503, 507),
     },
 )
 async def upload_fragment(
     site_id: SiteId, fragment_id: FragmentId, request: Request, backend: BackendDep
 ) -> JSONResponse:
     """Store a fragment (idempotent by content hash) and queue its processing."""
+    await check_upload_rate(backend, http_client_id(request, bool(backend.settings.tokens)))
     data = await read_limited(request, backend.settings.max_upload_bytes)
     reply = await ingest_fragment(backend, site_id, fragment_id, data)
     return JSONResponse(reply.model_dump(mode="json"), status_code=202 if reply.created else 200)

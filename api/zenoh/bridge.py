@@ -17,7 +17,7 @@ from typing import Any
 import redis
 import zenoh
 
-from api.errors import UnavailableError, error_body
+from api.errors import UnavailableError, error_body, storage_error
 from services.errors import JigsawError
 from store.connection import REDIS_DOWN
 
@@ -76,6 +76,8 @@ def error_of(exc: BaseException) -> tuple[str, str]:
     """``(code, message)`` of the contract's error body for any failure of a handler."""
     if isinstance(exc, JigsawError):
         return exc.code, exc.message
+    if isinstance(exc, redis.exceptions.RedisError) and (mapped := storage_error(exc)):
+        return mapped.code, mapped.message
     if isinstance(exc, (*REDIS_DOWN, redis.exceptions.RedisError)):
         return UnavailableError.code, f"storage unavailable: {type(exc).__name__}: {exc}"
     return "internal_error", "internal server error"

@@ -28,6 +28,7 @@ import zenoh
 
 from api.auth import authorize
 from api.errors import SiteNotFoundError, check_id
+from api.limits import check_upload_rate, client_id
 from api.site_data import load_result, site_exists
 from api.zenoh.bridge import LoopBridge, error_of, reply_error, reply_json
 from api.zenoh.ingest import attachment_prior, ingest_with_sender, parse_tag
@@ -237,6 +238,8 @@ class ZenohFront:
         tag = parse_tag(attachment, parameters)
         site_id, fragment_id = self.keys.parse_fragment(key) or ("", "")
         self._authorize(tag, "upload", site_id)
+        token = tag.token if self.settings.tokens else None  # unchecked, it proves nothing
+        await check_upload_rate(self.backend, client_id(token, f"robot:{tag.robot_id or '-'}"))
         prior = attachment_prior(attachment)
         sender = SenderRecord(robot_id=tag.robot_id) if tag.robot_id else None
         return await ingest_with_sender(self.backend, site_id, fragment_id, data, sender, prior)

@@ -96,6 +96,20 @@ def test_a_lying_size_header_cannot_inflate_past_the_cap() -> None:
         read_frame_archive(bytes(data), ArchiveLimits(max_entry_bytes=1000))
 
 
+def test_an_archive_may_not_inflate_far_past_its_own_size(files) -> None:
+    """32 MiB of zeros fit in the byte caps but deflate to ~32 KiB: a thousandfold bomb."""
+    bomb = _bomb(32 << 20)
+    assert len(bomb) * 100 < 32 << 20 <= ArchiveLimits().max_total_bytes
+    with pytest.raises(ArchiveTooLargeError, match="times its size"):
+        read_frame_archive(bomb)
+    assert read_frame_archive(bomb, ArchiveLimits(max_ratio=10_000))["depth.png"] == bytes(32 << 20)
+    # A real frame (PNGs barely shrink) is far from the ratio; tiny archives pass whatever it.
+    frame = zip_files(files)
+    assert read_frame_archive(frame, ArchiveLimits(max_ratio=1.5))
+    tiny = _raw_zip([("depth.png", bytes(500_000))])
+    assert read_frame_archive(tiny, ArchiveLimits(max_ratio=1)) == {"depth.png": bytes(500_000)}
+
+
 def test_a_gigabyte_entry_over_http_is_413_and_nothing_is_stored(
     server: ApiServer, redis_client
 ) -> None:
