@@ -80,7 +80,8 @@ def find_redis_server(configured: str | None = None) -> str:
 class EmbeddedRedis:
     """A private Redis server with append-only persistence under ``data_dir/redis``.
 
-    It listens on a Unix socket only (no TCP port to collide with or expose).
+    It listens on a Unix socket only (no TCP port to collide with or expose). :meth:`watch`
+    restarts it when it dies.
     """
 
     def __init__(
@@ -92,6 +93,8 @@ class EmbeddedRedis:
         self._socket_dir = ""
         self._lock_fd = -1
         self.process: subprocess.Popen[bytes] | None = None
+        self._stopping = threading.Event()
+        self._watcher: threading.Thread | None = None
 
     @property
     def url(self) -> str:
@@ -112,6 +115,12 @@ class EmbeddedRedis:
         """Start the server and wait until it answers; returns its URL."""
         self._lock()
         self._socket_dir = tempfile.mkdtemp(prefix="fpj-redis-")
+        self._launch(timeout)
+        log.info("embedded Redis (%s) at %s, data in %s", self.binary, self.url, self.dir)
+        return self.url
+
+    def _launch(self, timeout: float) -> None:
+        """Run redis-server on this data directory and socket; return once it answers."""
         command = [
             self.binary,
             *("--port", "0", "--unixsocket", f"{self._socket_dir}/redis.sock"),
@@ -142,11 +151,41 @@ class EmbeddedRedis:
                     time.sleep(0.05)
         finally:
             client.close()
-        log.info("embedded Redis (%s) at %s, data in %s", self.binary, self.url, self.dir)
-        return self.url
+
+    def watch(self, on_lost: Callable[[str], None], restarts: int = 3) -> None:
+        """Restart the server (same socket, same append-only file) whenever it dies, so the
+        API and workers find their storage again; when it cannot be restarted, or died more
+        than ``restarts`` times within a minute, call ``on_lost`` with the reason, once."""
+        self._watcher = threading.Thread(
+            target=self._watch, args=(on_lost, restarts), name="redis-watch", daemon=True
+        )
+        self._watcher.start()
+
+    def _watch(self, on_lost: Callable[[str], None], restarts: int) -> None:
+        # Relaunched from this thread, which lives until stop() (PR_SET_PDEATHSIG is per thread).
+        recent: list[float] = []
+        while not self._stopping.wait(0.2):
+            assert self.process is not None
+            code = self.process.poll()
+            if code is None:
+                continue
+            now = time.monotonic()
+            recent = [t for t in recent if now - t < 60.0] + [now]
+            log.error("embedded Redis exited with %s; restarting it from %s", code, self.dir)
+            try:
+                if len(recent) > restarts:
+                    raise RuntimeError(f"it died {len(recent)} times within a minute")
+                self._launch(timeout=60.0)  # a large append-only file takes time to load
+            except (OSError, RuntimeError, redis.exceptions.RedisError) as exc:
+                on_lost(f"embedded Redis lost and not restarted ({exc}); see {self.dir}")
+                return
+            log.warning("embedded Redis restarted (pid %d)", self.process.pid)
 
     def stop(self, timeout: float = 15.0) -> None:
         """SIGTERM: Redis flushes the append-only file and exits."""
+        self._stopping.set()
+        if self._watcher is not None and self._watcher is not threading.current_thread():
+            self._watcher.join(timeout)
         if self.process is not None and self.process.poll() is None:
             self.process.terminate()
             try:

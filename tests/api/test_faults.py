@@ -1,4 +1,5 @@
-"""Faults of the whole service: restarts of `jigsaw serve` (embedded Redis), Redis outages."""
+"""Faults of the whole service: restarts of `jigsaw serve` (embedded Redis), Redis outages and
+restarts, the embedded Redis killed, the data directory's disk full."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import subprocess
 import sys
 import time
 import zlib
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -43,8 +45,8 @@ def scene() -> SyntheticScene:
 class Serve:
     """`jigsaw serve` as a real process, embedded Redis and local workers included."""
 
-    def __init__(self, data_dir: Path) -> None:
-        settings = make_settings(None, data_dir=data_dir)  # default: 2 local workers
+    def __init__(self, data_dir: Path, **overrides: Any) -> None:
+        settings = make_settings(None, data_dir=data_dir, **overrides)  # 2 local workers
         self.env = settings_env(settings)
         self.port = free_port()
         self.process: subprocess.Popen[bytes] | None = None
@@ -228,3 +230,164 @@ def test_api_killed_during_an_upload_stores_no_partial_fragment(
     finally:
         serve.stop()
         raw.close()
+
+
+def _upload_scene(http: httpx.Client, site: str, scene: SyntheticScene) -> None:
+    for f in scene.fragments:
+        reply = http.put(f"/v1/sites/{site}/fragments/{f.id}", content=encode_ply(f.points))
+        assert reply.status_code == 202, reply.text
+
+
+def test_redis_restarted_mid_placement_loses_nothing_and_the_job_finishes(
+    redis_process: RedisProcess, api_factory, start_workers: Workers, scene
+) -> None:
+    """Redis (append-only file) killed outright while the site's placement runs, then started
+    again on the same file: every fragment and layout is still there, and the placement
+    (its job redelivered after the visibility timeout) ends in the closed result."""
+    settings = make_settings(redis_process.url, redis_timeout_s=1.0)
+    start_workers.start(settings, count=1)
+    client = redis.Redis.from_url(redis_process.url, decode_responses=True)
+    wait_workers_alive(client, "fpj", 1)
+    server: ApiServer = api_factory(settings)
+    with server.client() as http:
+        _upload_scene(http, "s", scene)
+        wait_until(lambda: client.hget("fpj:site:s", "placement_state") == "running", 60, 0.01)
+        before = {k: client.type(k) for k in client.scan_iter("fpj:site:s*")}
+        assert redis_process.process is not None
+        redis_process.process.kill()  # SIGKILL: no shutdown, only what the AOF holds
+        redis_process.process.wait(10)
+        time.sleep(0.5)
+        redis_process.start()
+        after = {k: client.type(k) for k in client.scan_iter("fpj:site:s*")}
+        assert before.items() <= after.items()  # nothing lost (a result may have come)
+        layouts = [client.exists(f"fpj:site:s:frag:{f.id}:layout") for f in scene.fragments]
+        assert all(layouts)
+        result = wait_result(http, "s", timeout=90, status="closed")
+        assert sorted(f["id"] for f in result["fragments"]) == [f.id for f in scene.fragments]
+    client.close()
+
+
+def _redis_child(serve: Serve) -> int:
+    found = [
+        pid
+        for pid in serve.children()
+        if b"redis" in Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[0]
+    ]
+    assert len(found) == 1, found
+    return found[0]
+
+
+def test_the_embedded_redis_killed_is_restarted_with_its_data(tmp_path: Path, scene) -> None:
+    """SIGKILL of the embedded Redis: the service answers 503 (never from nothing) until
+    it has restarted it on the same append-only file; then every result is there, and new
+    uploads are placed."""
+    serve = Serve(tmp_path / "data").start()
+    try:
+        with httpx.Client(base_url=serve.url, timeout=30) as http:
+            _upload_scene(http, "s", scene)
+            result = wait_result(http, "s", status="closed")
+            time.sleep(1.1)  # the append-only file is flushed every second
+            first = _redis_child(serve)
+            os.kill(first, signal.SIGKILL)
+            reply = http.get("/v1/sites/s/result")
+            assert reply.status_code in (200, 503), reply.text  # 200 only once restarted
+            if reply.status_code == 503:
+                assert reply.json()["error"]["code"] == "unavailable"
+            wait_until(lambda: http.get("/readyz").status_code == 200, 30, 0.1)
+            assert _redis_child(serve) != first
+            assert http.get("/v1/sites/s/result").json() == result
+            _upload_scene(http, "t", scene)
+            wait_result(http, "t", status="closed")
+        assert serve.process is not None and serve.process.poll() is None
+    finally:
+        serve.stop()
+
+
+def test_the_service_exits_when_its_redis_cannot_be_restarted(tmp_path: Path) -> None:
+    """The embedded Redis killed and its binary gone bad: `jigsaw serve` exits with status
+    1 and says why, rather than serve on without storage."""
+    from api.processes import find_redis_server
+
+    wrapper = tmp_path / "redis-server"
+    wrapper.write_text(f'#!/bin/sh\nexec {find_redis_server()} "$@"\n')
+    wrapper.chmod(0o755)
+    serve = Serve(tmp_path / "data", redis_binary=str(wrapper))
+    serve.start()
+    assert serve.process is not None
+    wrapper.write_text("#!/bin/sh\nexit 3\n")
+    os.kill(_redis_child(serve), signal.SIGKILL)
+    assert serve.process.wait(30) == 1
+
+
+@pytest.fixture
+def small_disk(tmp_path: Path) -> Iterator[Path]:
+    """A 48 MiB tmpfs (the data directory's own filesystem, which can be filled); skipped
+    where mounting is not allowed (not root, no CAP_SYS_ADMIN)."""
+    mount = tmp_path / "disk"
+    mount.mkdir()
+    done = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "size=48m", "tmpfs", str(mount)], capture_output=True
+    )
+    if done.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs: {done.stderr.decode().strip()}")
+    yield mount
+    subprocess.run(["umount", "-l", str(mount)], check=True)
+
+
+def _fill(path: Path) -> None:
+    with path.open("wb") as filler:
+        try:
+            while True:
+                filler.write(bytes(1 << 20))
+                filler.flush()
+        except OSError:
+            pass
+
+
+def test_a_full_data_disk_is_507_and_harms_nothing_stored(small_disk: Path, scene) -> None:
+    """The embedded Redis's data directory on a small filesystem, filled up: uploads get
+    507 storage_full (Redis cannot write its append-only file), what was stored reads
+    unchanged; with room again uploads are accepted, and after a restart everything is
+    there."""
+    serve = Serve(small_disk / "data").start()
+    try:
+        with httpx.Client(base_url=serve.url, timeout=30) as http:
+            _upload_scene(http, "s", scene)
+            result = wait_result(http, "s", status="closed")
+            status = http.get("/v1/sites/s").json()
+            time.sleep(1.1)
+            _fill(small_disk / "filler")
+            # Redis learns of the full disk writing its AOF after a reply, so a write or two
+            # may still be acknowledged (kept in memory, written once there is room).
+            codes = []
+            for k in range(20):
+                fid = f"late{k}"
+                reply = http.put(
+                    f"/v1/sites/t/fragments/{fid}",
+                    content=encode_ply(scene.fragments[k % len(scene.fragments)].points + k),
+                )
+                codes.append(reply.status_code)
+                if reply.status_code == 507:
+                    assert reply.json()["error"]["code"] == "storage_full", reply.text
+                    break
+                time.sleep(0.2)
+            assert codes[-1] == 507, codes
+            assert http.get("/v1/sites/s/result").json() == result
+            assert http.get("/v1/sites/s").json()["fragments"] == status["fragments"]
+            (small_disk / "filler").unlink()
+
+            def accepted() -> bool:
+                data = encode_ply(scene.fragments[0].points + 100)
+                return http.put("/v1/sites/u/fragments/f", content=data).status_code == 202
+
+            wait_until(accepted, 30, 0.5)
+            wait_until(lambda: http.get("/readyz").status_code == 200, 30, 0.2)
+            time.sleep(1.1)
+        assert serve.stop() == 0
+        serve.start()
+        with httpx.Client(base_url=serve.url, timeout=30) as http:
+            assert http.get("/v1/sites/s/result").json() == result
+            assert http.get("/v1/sites/u/fragments/f").status_code == 200
+    finally:
+        if serve.process is not None and serve.process.poll() is None:
+            serve.stop()
