@@ -77,6 +77,7 @@ class RequestTimeout:
         self.app, self.seconds = app, seconds
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        """Serve one request; past the deadline without a response, answer the error."""
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
