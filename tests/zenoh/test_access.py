@@ -9,7 +9,9 @@ touching its keys; robots are zenoh sessions of the test process on loopback.
 
 from __future__ import annotations
 
+import ipaddress
 import json
+import socket
 import subprocess
 import sys
 import time
@@ -35,6 +37,7 @@ from tests.service_fixtures import (
     wait_until,
 )
 from tests.zenoh.certs import Authority, CertFiles
+from tests.zenoh.conftest import ZenohService
 from transport.config import TlsOptions, ZenohOptions, build_config
 from transport.keys import ZenohKeys
 
@@ -271,3 +274,24 @@ def test_the_robot_command_authenticates(
     assert sent.returncode == 0, sent.stderr
     assert json.loads(sent.stdout)["fragment_id"] == "g"
     assert [f["fragment_id"] for f in http.get("/v1/sites/lab").json()["fragments"]] == ["g"]
+
+
+def _own_address() -> str | None:
+    """The address of this machine on its default route, if it has one beyond loopback."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.connect(("198.51.100.1", 9))  # no packet is sent: it only picks a route
+        except OSError:
+            return None
+        address = str(probe.getsockname()[0])
+    return None if ipaddress.ip_address(address).is_loopback else address
+
+
+def test_http_listens_on_loopback_only_by_default(zenoh_service: ZenohService) -> None:
+    """The package's service runs ``jigsaw serve --port N`` without --host."""
+    address = _own_address()
+    if address is None:
+        pytest.skip("this machine has no address beyond loopback")
+    assert httpx.get(f"{zenoh_service.url}/healthz", timeout=5).status_code == 200
+    with pytest.raises(httpx.ConnectError):
+        httpx.get(f"http://{address}:{zenoh_service.http_port}/healthz", timeout=5)
