@@ -204,8 +204,10 @@ class Settings(BaseSettings):
         default_factory=dict,
         description="zenoh access control: comma-separated PEER[:SITES[:RIGHTS]], PEER a "
         "certificate common name (zenoh_tls_mtls) or a user name (zenoh_users_file), rights "
-        "upload (put or query fragments) and read (subscribe to or query results and poses); "
-        "every other peer and message is denied; empty: no access control",
+        "upload (put or query fragments, publish on the site's ROS 2 cloud and depth "
+        "topics) and read (subscribe to or query results and poses; with * also the ROS 2 "
+        "pose, tf and map topics); every other peer and message is denied; empty: no access "
+        "control",
     )
     zenoh_presence_ttl_s: float = Field(
         10.0, gt=0, description="robot presence in Redis expires unless refreshed this often"
@@ -322,8 +324,6 @@ class Settings(BaseSettings):
                 "FPJ_ZENOH_ACL names peers by certificate or user name: set FPJ_ZENOH_TLS_MTLS "
                 "or FPJ_ZENOH_USERS_FILE, else every peer is unknown"
             )
-        if self.zenoh_acl and self.ros_enabled:
-            return "FPJ_ZENOH_ACL does not cover the ROS 2 topics: set one or the other"
         return None
 
     @property

@@ -11,7 +11,7 @@ from typing import Any, Literal
 import zenoh
 
 from schemas.settings import Settings
-from transport.acl import access_control
+from transport.acl import RosTopics, access_control
 from transport.keys import ZenohKeys
 
 __all__ = [
@@ -75,6 +75,18 @@ class ZenohOptions:
     access_control: dict[str, Any] | None = None
 
 
+def _ros_topics(settings: Settings) -> RosTopics:
+    inputs = dict(settings.ros_cloud_topics())
+    for depth in settings.ros_depth_topics():
+        inputs |= {depth.image: depth.site_id, depth.camera_info: depth.site_id}
+    outputs = (
+        settings.zenoh_ros_pose_topic,
+        settings.zenoh_ros_tf_topic,
+        settings.zenoh_ros_map_topic,
+    )
+    return RosTopics(settings.zenoh_ros_domain_id, inputs, tuple(t for t in outputs if t))
+
+
 def service_options(settings: Settings) -> ZenohOptions:
     """The service's session options from its settings (``FPJ_ZENOH_*``)."""
     tls = TlsOptions(
@@ -90,6 +102,7 @@ def service_options(settings: Settings) -> ZenohOptions:
             settings.zenoh_acl,
             by_certificate=settings.zenoh_tls_mtls,
             by_user=settings.zenoh_users_file is not None,
+            ros=_ros_topics(settings) if settings.ros_enabled else None,
         )
     password = settings.zenoh_password
     return ZenohOptions(

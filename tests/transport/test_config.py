@@ -93,10 +93,6 @@ def test_security_settings_reach_the_config() -> None:
         ({"zenoh_user": "svc"}, "go together"),
         ({"zenoh_acl": "robot1"}, "every peer is unknown"),
         ({"zenoh_acl": "robot1:lab:write", "zenoh_users_file": "u"}, "rights"),
-        (
-            {"zenoh_acl": "r", "zenoh_users_file": "u", "zenoh_ros_pose_topic": "/p"},
-            "ROS 2",
-        ),
     ],
 )
 def test_insecure_or_incomplete_security_settings_are_refused(
@@ -104,6 +100,25 @@ def test_insecure_or_incomplete_security_settings_are_refused(
 ) -> None:
     with pytest.raises(ValueError, match=message):
         Settings(**fields)  # type: ignore[arg-type]
+
+
+def test_ros_topics_follow_the_rights() -> None:
+    settings = Settings(
+        zenoh_users_file="users",
+        zenoh_acl="robot1:lab:upload,viewer:*:read,r2:hall:read+upload",
+        zenoh_ros_cloud_topics="/robot1/fragments=lab",
+        zenoh_ros_depth_topics="/cam/depth:/cam/info=hall",
+        zenoh_ros_tf_topic="/tf",
+        zenoh_ros_domain_id=3,
+    )
+    acl = service_options(settings).access_control
+    assert acl is not None
+    rules = {r["id"]: r["key_exprs"] for r in acl["rules"]}
+    assert rules["robot1/upload/ros"] == ["3/robot1/fragments/*/*"]
+    assert rules["r2/upload/ros"] == ["3/cam/depth/*/*", "3/cam/info/*/*"]
+    assert rules["viewer/read/ros/out"] == ["3/tf/*/*"]
+    assert "r2/read/ros/out" not in rules  # the transforms carry every site's fragments
+    assert rules["known/ros/graph/in"] == ["@ros2_lv/3/**"]
 
 
 def test_endpoints_reachable_from_the_network() -> None:

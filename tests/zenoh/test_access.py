@@ -26,6 +26,7 @@ import pytest
 import redis
 import zenoh
 
+from api.zenoh import ros2
 from store.keys import Keys
 from tests.service_fixtures import (
     ROOT,
@@ -33,6 +34,7 @@ from tests.service_fixtures import (
     free_port,
     make_settings,
     ply_bytes,
+    random_cloud,
     settings_env,
     wait_until,
 )
@@ -295,3 +297,77 @@ def test_http_listens_on_loopback_only_by_default(zenoh_service: ZenohService) -
     assert httpx.get(f"{zenoh_service.url}/healthz", timeout=5).status_code == 200
     with pytest.raises(httpx.ConnectError):
         httpx.get(f"http://{address}:{zenoh_service.http_port}/healthz", timeout=5)
+
+
+def test_ros_topics_follow_the_acl(redis7_url: str, tmp_path: Path) -> None:
+    """rmw_zenoh traffic obeys FPJ_ZENOH_ACL too: a cloud topic takes clouds from peers with
+    upload on its site only; the transforms (every site's) go to peers reading every site."""
+    users = tmp_path / "users"
+    users.write_text("robot1:pw-1\nviewer:pw-v\nr2:pw-2\n")
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    settings = make_settings(
+        redis7_url,
+        key_prefix=PREFIX,
+        zenoh_listen=endpoint,
+        zenoh_users_file=users,
+        zenoh_acl="robot1:lab:upload,viewer:*:read,r2:hall:upload+read",
+        zenoh_ros_cloud_topics="/robot1/fragments=lab",
+        zenoh_ros_tf_topic="/tf",
+    )
+    cloud_key = ros2.topic_key(
+        0, "/robot1/fragments", ros2.CLOUD_TYPE, ros2.type_hash(ros2.CLOUD_TYPE)
+    )
+    tf_key = ros2.topic_key(0, "/tf", ros2.TF_TYPE)
+
+    def peer(user: str, password: str) -> ZenohOptions:
+        return ZenohOptions(connect=[endpoint], user=user, password=password)
+
+    def publish_cloud(session: zenoh.Session, sec: int) -> None:
+        with session.declare_publisher(cloud_key) as publisher:
+            wait_until(lambda: publisher.matching_status.matching, 10)  # type: ignore[attr-defined]
+            cdr = ros2.encode_pointcloud2(random_cloud(300, sec), sec, 0, "lidar")
+            gid = ros2.entity_gid(f"publisher {sec}")
+            publisher.put(cdr, attachment=ros2.encode_attachment(1, time.time_ns(), gid))
+
+    server = ApiServer(settings).start()
+    client = redis.Redis.from_url(redis7_url)
+    try:
+        with (
+            server.client() as http,
+            zenoh.open(build_config(peer("r2", "pw-2"))) as other,
+            zenoh.open(build_config(peer("viewer", "pw-v"))) as viewer,
+            zenoh.open(build_config(peer("robot1", "pw-1"))) as robot,
+        ):
+            got: dict[str, list[bytes]] = {"r2": [], "viewer": []}
+            subscribers = [
+                other.declare_subscriber(tf_key, lambda s: got["r2"].append(s.payload.to_bytes())),
+                viewer.declare_subscriber(
+                    tf_key, lambda s: got["viewer"].append(s.payload.to_bytes())
+                ),
+            ]
+            publish_cloud(other, 1_700_000_001)  # r2 has no upload right on lab
+            publish_cloud(robot, 1_700_000_002)
+
+            def stored() -> list[str]:
+                reply = http.get("/v1/sites/lab")
+                fragments = reply.json()["fragments"] if reply.status_code == 200 else []
+                return [f["fragment_id"] for f in fragments]
+
+            wait_until(lambda: stored(), 15)
+            time.sleep(0.5)  # r2's cloud, sent first, would be stored by now
+            assert stored() == ["robot1_1700000002_000000000"]
+
+            envelope = json.dumps(
+                {"version": 1, "site_id": "lab", "generation": 1, "result": RESULT}
+            )
+            wait_until(lambda: client.publish(Keys(PREFIX).results_channel, envelope), 10)
+            wait_until(lambda: got["viewer"], 10)
+            time.sleep(0.5)
+            assert got["r2"] == []
+            for subscriber in subscribers:
+                subscriber.undeclare()
+    finally:
+        server.stop()
+        for key in client.scan_iter(f"{PREFIX}:*"):
+            client.delete(key)
+        client.close()
