@@ -4,11 +4,13 @@ are ingested silently, bad fragments change nothing; the result and service quer
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
+import redis
 import zenoh
 
 from schemas.service import UploadReply
@@ -127,3 +129,25 @@ def test_send_refuses_what_the_service_would_refuse(
     with zenoh_service.http() as http:
         ids = [f["fragment_id"] for f in http.get("/v1/sites/zcli").json()["fragments"]]
     assert ids == ["good"]
+
+
+def test_a_robot_past_the_upload_rate_gets_rate_limited(zenoh_service: ZenohService) -> None:
+    """The counter of robot 'flood' (no tokens: counted per robot id) set at the limit in
+    Redis: its next query is refused with rate_limited and stores nothing; another robot
+    still uploads."""
+    settings = zenoh_service.settings
+    window = settings.upload_rate_window_s
+    client = redis.Redis.from_url(str(settings.redis_url))
+    now = int(time.time() // window)
+    for index in (now, now + 1):  # the query may land in the next window
+        client.set(f"fpj:rate:robot:flood:{index}", settings.upload_rate_limit, ex=300)
+    keys = zenoh_service.keys
+    flood = json.dumps({"robot_id": "flood"}).encode()
+    calm = json.dumps({"robot_id": "calm"}).encode()
+    with robot_session(zenoh_service) as session, zenoh_service.http() as http:
+        ok, body = _query(session, keys.fragment("zrate", "f1"), ply_bytes(300), flood)
+        assert not ok and body["error"]["code"] == "rate_limited", body
+        assert "retry in" in body["error"]["message"]
+        assert http.get("/v1/sites/zrate").status_code == 404
+        assert _query(session, keys.fragment("zrate", "f1"), ply_bytes(300), calm)[0]
+    client.close()
