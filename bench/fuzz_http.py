@@ -66,8 +66,8 @@ class Row:
 class FuzzedService(Service):
     """The load benchmark's private service, with a bearer token and zenoh off."""
 
-    def _env(self) -> dict[str, str]:
-        env = super()._env()
+    def _env(self, zenoh_listen: str = "none") -> dict[str, str]:
+        env = super()._env(zenoh_listen)
         env.update(FPJ_TOKENS=FUZZ_TOKEN, FPJ_ZENOH_LISTEN="none", FPJ_MIN_POINTS="100")
         return env
 

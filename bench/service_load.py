@@ -10,6 +10,9 @@ For each worker count it starts a private Redis, `jigsaw serve` (no local worker
   time until every site is settled;
 - queue latency and job run times, from the service's own /metrics.
 
+The fleet benchmark (robots over HTTP and zenoh across many sites, several API processes)
+is ``bench/fleet_load.py``, on the same :class:`Service`.
+
     .venv/bin/python bench/service_load.py --workers 1 2 --fragments 8 --points 100000
 
 Everything runs on this machine; the numbers include HTTP, Redis and the real pipeline.
@@ -62,17 +65,31 @@ def make_fragments(count: int, points: int, seed: int) -> tuple[int, dict[str, b
 
 
 class Service:
-    """Private Redis + `jigsaw serve` + N `jigsaw worker`, as real processes."""
+    """Private Redis + ``apis`` x `jigsaw serve` + N `jigsaw worker`, as real processes.
 
-    def __init__(self, workers: int, concurrency: int) -> None:
+    Every API process has its own HTTP port and, with ``zenoh``, its own zenoh listen
+    endpoint on loopback (none otherwise). The upload rate limit is off: every simulated
+    robot comes from 127.0.0.1, which a per-address limit would count as one client.
+    """
+
+    def __init__(self, workers: int, concurrency: int, apis: int = 1, zenoh: bool = False) -> None:
         self.dir = Path(tempfile.mkdtemp(prefix="fpj-bench-"))
-        self.redis_port, self.http_port = free_tcp_port(), free_tcp_port()
+        self.redis_port = free_tcp_port()
+        self.http_ports = [free_tcp_port() for _ in range(apis)]
+        self.zenoh_ports = [free_tcp_port() for _ in range(apis)] if zenoh else []
         self.redis_url = f"redis://127.0.0.1:{self.redis_port}/0"
-        self.url = f"http://127.0.0.1:{self.http_port}"
+        self.urls = [f"http://127.0.0.1:{port}" for port in self.http_ports]
+        self.url = self.urls[0]
         self.workers, self.concurrency = workers, concurrency
         self.processes: list[subprocess.Popen[bytes]] = []
+        self.roles: list[str] = []  # "redis", "api" or "worker", one per process
 
-    def _env(self) -> dict[str, str]:
+    @property
+    def zenoh_endpoints(self) -> list[str]:
+        """The API processes' zenoh listen endpoints (empty without zenoh)."""
+        return [f"tcp/127.0.0.1:{port}" for port in self.zenoh_ports]
+
+    def _env(self, zenoh_listen: str = "none") -> dict[str, str]:
         env = {k: v for k, v in os.environ.items() if not k.startswith("FPJ_")}
         env.update(
             FPJ_REDIS_URL=self.redis_url,
@@ -80,35 +97,39 @@ class Service:
             FPJ_LOG_LEVEL="warning",
             FPJ_WORKER_CONCURRENCY=str(self.concurrency),
             FPJ_PLACEMENT_TIMEOUT_S="900",
+            FPJ_UPLOAD_RATE_LIMIT="0",
+            FPJ_ZENOH_LISTEN=zenoh_listen,
             PYTHONPATH=str(ROOT),
         )
         return env
 
+    def _spawn(self, role: str, command: list[str], env: dict[str, str] | None = None) -> None:
+        stdout = subprocess.DEVNULL if role == "redis" else None
+        self.processes.append(subprocess.Popen(command, env=env, cwd=ROOT, stdout=stdout))
+        self.roles.append(role)
+
     def start(self) -> None:
-        """Start Redis, the API and the workers; return once all workers are ready."""
-        self.processes.append(
-            subprocess.Popen(
-                [
-                    *("redis-server", "--port", str(self.redis_port), "--bind", "127.0.0.1"),
-                    *("--dir", str(self.dir), "--save", "", "--appendonly", "no"),
-                ],
-                stdout=subprocess.DEVNULL,
-            )
+        """Start Redis, the APIs and the workers; return once all workers are ready."""
+        self._spawn(
+            "redis",
+            [
+                *("redis-server", "--port", str(self.redis_port), "--bind", "127.0.0.1"),
+                *("--dir", str(self.dir), "--save", "", "--appendonly", "no"),
+            ],
         )
         client = redis.Redis.from_url(self.redis_url)
         self._wait(lambda: _ping(client), "redis")
         cli = [sys.executable, "-m", "cli.main"]
-        env = self._env()
-        self.processes.append(
-            subprocess.Popen([*cli, "serve", "--port", str(self.http_port)], env=env, cwd=ROOT)
-        )
+        for k, port in enumerate(self.http_ports):
+            listen = self.zenoh_endpoints[k] if self.zenoh_ports else "none"
+            self._spawn("api", [*cli, "serve", "--port", str(port)], self._env(listen))
         for _ in range(self.workers):
-            self.processes.append(subprocess.Popen([*cli, "worker"], env=env, cwd=ROOT))
-        self._wait(lambda: self._ready(), "service")
+            self._spawn("worker", [*cli, "worker"], self._env())
+        self._wait(lambda: all(self._ready(url) for url in self.urls), "service")
 
-    def _ready(self) -> bool:
+    def _ready(self, url: str) -> bool:
         try:
-            reply = httpx.get(f"{self.url}/readyz", timeout=1)
+            reply = httpx.get(f"{url}/readyz", timeout=1)
         except httpx.TransportError:
             return False
         return reply.status_code == 200 and reply.json()["workers"] == self.workers
@@ -139,9 +160,12 @@ def _ping(client: redis.Redis) -> bool:
 
 
 @contextmanager
-def running(workers: int, concurrency: int) -> Iterator[Service]:
-    """A running service with ``workers`` workers, stopped after the block."""
-    service = Service(workers, concurrency)
+def running(
+    workers: int, concurrency: int, apis: int = 1, zenoh: bool = False
+) -> Iterator[Service]:
+    """A running service with ``workers`` workers and ``apis`` API processes, stopped after
+    the block."""
+    service = Service(workers, concurrency, apis, zenoh)
     try:
         service.start()
         yield service
