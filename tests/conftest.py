@@ -1,4 +1,5 @@
-"""Shared fixtures: small synthetic scenes (cached per session) and chain builders."""
+"""Shared fixtures: synthetic scenes and their local layouts (built once per session), and
+chain builders."""
 
 from __future__ import annotations
 
@@ -9,9 +10,11 @@ import numpy as np
 import pytest
 
 from schemas.params import PlacementParams
+from services.pipeline import estimate_layout
 from services.placement import Piece, direction_index, rot90
 from services.placement.pieces import FreeSpace
 from services.synthetic import SceneSpec, SyntheticScene, generate_scene
+from services.types import LocalLayout
 from tests.service_fixtures import (  # noqa: F401  (real Redis 7 / 6.2, uvicorn, workers)
     any_redis,
     api,
@@ -33,6 +36,7 @@ __all__ = [
     "end_boxes",
     "end_shell",
     "overlapping_halves",
+    "scene_layouts",
     "small_scene",
 ]
 
@@ -58,6 +62,29 @@ def small_scene(preset: str = "easy", seed: int = 0, points: int = 30_000) -> Sy
     spec = getattr(SceneSpec, preset)()
     spec = dataclasses.replace(spec, points_per_fragment=(points, points + 10_000))
     return generate_scene(spec, seed)
+
+
+@cache
+def _small_scene_layouts(
+    preset: str, seed: int, points: int
+) -> tuple[tuple[str, LocalLayout], ...]:
+    scene = small_scene(preset, seed, points)
+    return tuple((f.id, estimate_layout(f.points)) for f in scene.fragments)
+
+
+def scene_layouts(
+    preset: str = "easy", seed: int = 0, points: int = 30_000
+) -> dict[str, LocalLayout]:
+    """Local layouts (default parameters) of :func:`small_scene`'s fragments, computed once per
+    session; a new dict each call, so a test may add or drop fragments."""
+    return dict(_small_scene_layouts(preset, seed, points))
+
+
+@pytest.fixture(scope="session")
+def easy_scene() -> SyntheticScene:
+    """The easy preset's scene of seed 0 at full density (what the service tests upload),
+    built once per session."""
+    return generate_scene(SceneSpec.easy(), 0)
 
 
 def _perimeter(polygon: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

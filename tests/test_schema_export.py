@@ -8,8 +8,8 @@ import jsonschema
 import pytest
 
 from schemas.export import SCHEMA_DIR, render_schemas
-from services.pipeline import estimate_layout, place_site
-from tests.conftest import small_scene
+from services.pipeline import place_site
+from tests.conftest import scene_layouts
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -25,9 +25,7 @@ def test_committed_schemas_are_current():
 
 
 def test_a_real_result_validates_against_the_exported_schema():
-    scene = small_scene("easy", 0)
-    layouts = {f.id: estimate_layout(f.points) for f in scene.fragments}
-    result = place_site(layouts).model_dump(mode="json")
+    result = place_site(scene_layouts()).model_dump(mode="json")
     schema = json.loads((SCHEMA_DIR / "result.schema.json").read_text(encoding="utf-8"))
     jsonschema.validate(result, schema)
     with pytest.raises(jsonschema.ValidationError):

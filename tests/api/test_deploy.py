@@ -17,7 +17,7 @@ import redis
 import yaml
 
 from services.point_io import encode_ply
-from services.synthetic import SceneSpec, generate_scene
+from services.synthetic import SyntheticScene
 from tests.service_fixtures import (
     ROOT,
     RedisProcess,
@@ -119,7 +119,9 @@ def _healthcheck(test: list[str], env: dict[str, str]) -> int:
     return subprocess.run(command, env=env, cwd=ROOT, timeout=30).returncode
 
 
-def test_compose_topology_as_processes(redis_process: RedisProcess, tmp_path: Path) -> None:
+def test_compose_topology_as_processes(
+    redis_process: RedisProcess, tmp_path: Path, easy_scene: SyntheticScene
+) -> None:
     settings = make_settings(redis_process.url, local_workers=0, data_dir=tmp_path)
     env = settings_env(settings)
     port = free_port()
@@ -146,9 +148,8 @@ def test_compose_topology_as_processes(redis_process: RedisProcess, tmp_path: Pa
         ]
         assert _healthcheck(api_check, env) == 0
         assert _healthcheck(compose["worker"]["healthcheck"]["test"], env) == 0
-        scene = generate_scene(SceneSpec.easy(), 0)
         with httpx.Client(base_url=url, timeout=30) as http:
-            for f in scene.fragments:
+            for f in easy_scene.fragments:
                 http.put(f"/v1/sites/s/fragments/{f.id}", content=encode_ply(f.points))
             wait_result(http, "s", status="closed")
             assert http.get("/readyz").json()["workers"] == 2

@@ -20,7 +20,7 @@ import pytest
 import redis
 
 from services.point_io import encode_ply
-from services.synthetic import SceneSpec, SyntheticScene, generate_scene
+from services.synthetic import SyntheticScene
 from tests.service_fixtures import (
     ROOT,
     ApiServer,
@@ -35,11 +35,6 @@ from tests.service_fixtures import (
 )
 
 pytestmark = pytest.mark.timeout(180)
-
-
-@pytest.fixture(scope="module")
-def scene() -> SyntheticScene:
-    return generate_scene(SceneSpec.easy(), 0)
 
 
 class Serve:
@@ -93,13 +88,13 @@ def _gone(pid: int) -> bool:
         return True
 
 
-def test_restarts_keep_accepted_fragments_and_results(tmp_path: Path, scene) -> None:
+def test_restarts_keep_accepted_fragments_and_results(tmp_path: Path, easy_scene) -> None:
     serve = Serve(tmp_path / "data").start()
     try:
         children = serve.children()
         assert len(children) == 3  # Redis and two workers
         with httpx.Client(base_url=serve.url, timeout=30) as http:
-            for f in scene.fragments:
+            for f in easy_scene.fragments:
                 assert (
                     http.put(
                         f"/v1/sites/s/fragments/{f.id}", content=encode_ply(f.points)
@@ -117,7 +112,7 @@ def test_restarts_keep_accepted_fragments_and_results(tmp_path: Path, scene) -> 
         with httpx.Client(base_url=serve.url, timeout=30) as http:
             assert http.get("/v1/sites/s/result").json() == result
             assert http.get("/v1/sites/s").json() == status
-            first = scene.fragments[0]
+            first = easy_scene.fragments[0]
             again = http.put(f"/v1/sites/s/fragments/{first.id}", content=encode_ply(first.points))
             assert again.status_code == 200
         # Killed outright, the server takes its Redis and workers with it (no orphan keeps
@@ -134,14 +129,14 @@ def test_restarts_keep_accepted_fragments_and_results(tmp_path: Path, scene) -> 
 
 
 def test_redis_outage_gives_503s_then_work_resumes(
-    redis_process: RedisProcess, api_factory, start_workers: Workers, scene
+    redis_process: RedisProcess, api_factory, start_workers: Workers, easy_scene
 ) -> None:
     settings = make_settings(redis_process.url, redis_timeout_s=1.0)
     start_workers.start(settings, count=1)
     client = redis.Redis.from_url(redis_process.url, decode_responses=True)
     wait_workers_alive(client, "fpj", 1)
     server: ApiServer = api_factory(settings)
-    first, *rest = scene.fragments
+    first, *rest = easy_scene.fragments
     with server.client() as http:
         assert (
             http.put(
@@ -168,7 +163,7 @@ def test_redis_outage_gives_503s_then_work_resumes(
                 == 202
             )
         result = wait_result(http, "s", timeout=60, status="closed")
-        assert sorted(f["id"] for f in result["fragments"]) == [f.id for f in scene.fragments]
+        assert sorted(f["id"] for f in result["fragments"]) == [f.id for f in easy_scene.fragments]
         assert http.get("/readyz").status_code == 200
     client.close()
 
@@ -239,7 +234,7 @@ def _upload_scene(http: httpx.Client, site: str, scene: SyntheticScene) -> None:
 
 
 def test_redis_restarted_mid_placement_loses_nothing_and_the_job_finishes(
-    redis_process: RedisProcess, api_factory, start_workers: Workers, scene
+    redis_process: RedisProcess, api_factory, start_workers: Workers, easy_scene
 ) -> None:
     """Redis (append-only file) killed outright while the site's placement runs, then started
     again on the same file: every fragment and layout is still there, and the placement
@@ -250,7 +245,7 @@ def test_redis_restarted_mid_placement_loses_nothing_and_the_job_finishes(
     wait_workers_alive(client, "fpj", 1)
     server: ApiServer = api_factory(settings)
     with server.client() as http:
-        _upload_scene(http, "s", scene)
+        _upload_scene(http, "s", easy_scene)
         wait_until(lambda: client.hget("fpj:site:s", "placement_state") == "running", 60, 0.01)
         before = {k: client.type(k) for k in client.scan_iter("fpj:site:s*")}
         assert redis_process.process is not None
@@ -260,10 +255,10 @@ def test_redis_restarted_mid_placement_loses_nothing_and_the_job_finishes(
         redis_process.start()
         after = {k: client.type(k) for k in client.scan_iter("fpj:site:s*")}
         assert before.items() <= after.items()  # nothing lost (a result may have come)
-        layouts = [client.exists(f"fpj:site:s:frag:{f.id}:layout") for f in scene.fragments]
+        layouts = [client.exists(f"fpj:site:s:frag:{f.id}:layout") for f in easy_scene.fragments]
         assert all(layouts)
         result = wait_result(http, "s", timeout=90, status="closed")
-        assert sorted(f["id"] for f in result["fragments"]) == [f.id for f in scene.fragments]
+        assert sorted(f["id"] for f in result["fragments"]) == [f.id for f in easy_scene.fragments]
     client.close()
 
 
@@ -277,14 +272,14 @@ def _redis_child(serve: Serve) -> int:
     return found[0]
 
 
-def test_the_embedded_redis_killed_is_restarted_with_its_data(tmp_path: Path, scene) -> None:
+def test_the_embedded_redis_killed_is_restarted_with_its_data(tmp_path: Path, easy_scene) -> None:
     """SIGKILL of the embedded Redis: the service answers 503 (never from nothing) until
     it has restarted it on the same append-only file; then every result is there, and new
     uploads are placed."""
     serve = Serve(tmp_path / "data").start()
     try:
         with httpx.Client(base_url=serve.url, timeout=30) as http:
-            _upload_scene(http, "s", scene)
+            _upload_scene(http, "s", easy_scene)
             result = wait_result(http, "s", status="closed")
             time.sleep(1.1)  # the append-only file is flushed every second
             first = _redis_child(serve)
@@ -296,7 +291,7 @@ def test_the_embedded_redis_killed_is_restarted_with_its_data(tmp_path: Path, sc
             wait_until(lambda: http.get("/readyz").status_code == 200, 30, 0.1)
             assert _redis_child(serve) != first
             assert http.get("/v1/sites/s/result").json() == result
-            _upload_scene(http, "t", scene)
+            _upload_scene(http, "t", easy_scene)
             wait_result(http, "t", status="closed")
         assert serve.process is not None and serve.process.poll() is None
     finally:
@@ -344,7 +339,7 @@ def _fill(path: Path) -> None:
             pass
 
 
-def test_a_full_data_disk_is_507_and_harms_nothing_stored(small_disk: Path, scene) -> None:
+def test_a_full_data_disk_is_507_and_harms_nothing_stored(small_disk: Path, easy_scene) -> None:
     """The embedded Redis's data directory on a small filesystem, filled up: uploads get
     507 storage_full (Redis cannot write its append-only file), what was stored reads
     unchanged; with room again uploads are accepted, and after a restart everything is
@@ -352,7 +347,7 @@ def test_a_full_data_disk_is_507_and_harms_nothing_stored(small_disk: Path, scen
     serve = Serve(small_disk / "data").start()
     try:
         with httpx.Client(base_url=serve.url, timeout=30) as http:
-            _upload_scene(http, "s", scene)
+            _upload_scene(http, "s", easy_scene)
             result = wait_result(http, "s", status="closed")
             status = http.get("/v1/sites/s").json()
             time.sleep(1.1)
@@ -364,7 +359,9 @@ def test_a_full_data_disk_is_507_and_harms_nothing_stored(small_disk: Path, scen
                 fid = f"late{k}"
                 reply = http.put(
                     f"/v1/sites/t/fragments/{fid}",
-                    content=encode_ply(scene.fragments[k % len(scene.fragments)].points + k),
+                    content=encode_ply(
+                        easy_scene.fragments[k % len(easy_scene.fragments)].points + k
+                    ),
                 )
                 codes.append(reply.status_code)
                 if reply.status_code == 507:
@@ -377,7 +374,7 @@ def test_a_full_data_disk_is_507_and_harms_nothing_stored(small_disk: Path, scen
             (small_disk / "filler").unlink()
 
             def accepted() -> bool:
-                data = encode_ply(scene.fragments[0].points + 100)
+                data = encode_ply(easy_scene.fragments[0].points + 100)
                 return http.put("/v1/sites/u/fragments/f", content=data).status_code == 202
 
             wait_until(accepted, 30, 0.5)

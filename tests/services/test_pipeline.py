@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from functools import cache
 from typing import get_args
 
 import numpy as np
@@ -17,18 +16,14 @@ from services.geometry import signed_area
 from services.pipeline import align_clouds, align_fragments, estimate_layout, place_site
 from services.synthetic import ground_truth_json
 from services.types import LocalLayout, ManhattanFrame, ParsedFragment
-from tests.conftest import UNTUNED, chains_from_polygon, small_scene
+from tests.conftest import UNTUNED, chains_from_polygon, scene_layouts, small_scene
 
 pytestmark = pytest.mark.timeout(300)
 
 
-def _layouts(scene):
-    return {f.id: estimate_layout(f.points) for f in scene.fragments}
-
-
 def test_easy_scene_closes_with_accurate_poses():
     scene = small_scene("easy", 2, 40_000)
-    result = place_site(_layouts(scene))
+    result = place_site(scene_layouts("easy", 2, 40_000))
     ResultModel.model_validate(result.model_dump())
     assert result.status == "closed"
     report = evaluate_result(result.model_dump(mode="json"), ground_truth_json(scene))
@@ -45,7 +40,7 @@ def test_easy_scene_closes_with_accurate_poses():
 
 def test_floor_is_at_zero_in_the_site_frame():
     scene = small_scene("easy", 2, 40_000)
-    result = place_site(_layouts(scene))
+    result = place_site(scene_layouts("easy", 2, 40_000))
     for fragment, truth in zip(result.fragments, scene.fragments, strict=True):
         pose = np.array(fragment.pose)
         floor_world = truth.pose @ np.array([0, 0, 0, 1.0])
@@ -57,17 +52,16 @@ def test_floor_is_at_zero_in_the_site_frame():
 def test_single_fragment_is_open_and_placed():
     scene = small_scene("easy", 0)
     fragment = scene.fragments[0]
-    result = place_site({fragment.id: estimate_layout(fragment.points)})
+    result = place_site({fragment.id: scene_layouts()[fragment.id]})
     assert result.status == "open"
     assert result.fragments[0].placed
     assert result.floorplan.rooms == []
 
 
 def test_fragment_without_walls_is_reported_unplaced():
-    scene = small_scene("easy", 0)
     rng = np.random.default_rng(0)
     floor = np.column_stack([rng.uniform(0, 3, 8000), rng.uniform(0, 3, 8000), np.zeros(8000)])
-    layouts = _layouts(scene)
+    layouts = scene_layouts()
     layouts["floor_only"] = estimate_layout(floor)
     result = place_site(layouts)
     assert result.status == "open"
@@ -87,8 +81,7 @@ def test_nothing_usable_fails_cleanly():
 
 def test_two_identical_fragments_give_a_defined_status():
     scene = small_scene("easy", 0)
-    fragment = scene.fragments[0]
-    layout = estimate_layout(fragment.points)
+    layout = scene_layouts()[scene.fragments[0].id]
     result = place_site({"a": layout, "b": layout})
     assert result.status in ("open", "closed")
     assert {f.id for f in result.fragments} == {"a", "b"}
@@ -156,12 +149,6 @@ def test_premerge_gives_every_input_fragment_a_pose():
 L_ROOM = np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], dtype=np.float64)
 
 
-@cache
-def _scene_layouts(seed: int) -> dict[str, LocalLayout]:
-    """Local layouts of a small easy scene, computed once per module run."""
-    return _layouts(small_scene("easy", seed))
-
-
 def _rz(angle: float) -> np.ndarray:
     c, s = math.cos(angle), math.sin(angle)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
@@ -219,7 +206,7 @@ def _true_priors(scene, moved: str | None = None, by: float = 10.0) -> HintsMode
 
 
 def test_result_follows_contract_v2():
-    result = place_site(_scene_layouts(0))
+    result = place_site(scene_layouts())
     assert result.schema_version == 2
     assert result.status in get_args(Status)
     assert result.status == "closed"
@@ -308,7 +295,7 @@ def test_a_contradicted_order_hint_is_reported():
 
 def test_with_prior_poses_the_result_is_in_the_hints_frame():
     scene = small_scene("easy", 0)
-    layouts = _scene_layouts(0)
+    layouts = scene_layouts()
     without = _pose_errors(place_site(layouts), scene)
     assert max(d for d, _ in without.values()) > 1.0  # the site frame is not the world's
     result = place_site(layouts, hints=_true_priors(scene))
@@ -324,7 +311,7 @@ def test_with_prior_poses_the_result_is_in_the_hints_frame():
 def test_a_contradicted_prior_is_reported():
     scene = small_scene("easy", 0)
     moved = scene.fragments[1].id
-    result = place_site(_scene_layouts(0), hints=_true_priors(scene, moved=moved))
+    result = place_site(scene_layouts(), hints=_true_priors(scene, moved=moved))
     assert result.status == "closed"
     reported = [h for h in result.diagnostics["hints_contradicted"] if h["kind"] == "pose"]
     assert [moved] in [h["fragments"] for h in reported]
@@ -333,7 +320,7 @@ def test_a_contradicted_prior_is_reported():
 def test_a_contradicted_prior_does_not_move_the_others():
     scene = small_scene("easy", 0)
     moved = scene.fragments[1].id
-    result = place_site(_scene_layouts(0), hints=_true_priors(scene, moved=moved))
+    result = place_site(scene_layouts(), hints=_true_priors(scene, moved=moved))
     errors = _pose_errors(result, scene)
     for fid, (distance, yaw) in errors.items():
         if fid != moved:
@@ -381,13 +368,13 @@ def test_each_fragment_says_how_sure_its_own_pose_is():
 
 
 def test_fragment_confidence_is_at_least_the_rooms_when_closed_and_absent_when_open():
-    closed = place_site(_scene_layouts(0))
+    closed = place_site(scene_layouts())
     assert closed.status == "closed"
     assert all(
         f.confidence is not None and f.confidence >= closed.confidence - 1e-9
         for f in closed.fragments
     )
-    layouts = _scene_layouts(0)
+    layouts = scene_layouts()
     alone = place_site({fid: layouts[fid] for fid in list(layouts)[:1]})
     assert alone.status == "open"
     assert all(f.confidence is None for f in alone.fragments)

@@ -6,16 +6,14 @@ import numpy as np
 import pytest
 
 from schemas.layout import LocalLayoutWire
-from services.pipeline import estimate_layout
 from store.layouts import layout_from_wire, layout_to_wire
-from tests.conftest import small_scene
+from tests.conftest import scene_layouts, small_scene
 
 pytestmark = pytest.mark.timeout(300)
 
 
 def test_layout_survives_the_wire_format():
-    scene = small_scene("easy", 0)
-    layout = estimate_layout(scene.fragments[0].points)
+    layout = scene_layouts()[small_scene("easy", 0).fragments[0].id]
     back = layout_from_wire(
         LocalLayoutWire.model_validate_json(layout_to_wire(layout).model_dump_json())
     )

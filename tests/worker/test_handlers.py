@@ -19,7 +19,7 @@ from schemas.hints import HintsModel
 from schemas.jobs import LayoutJob, PlacementJob, decode_job
 from schemas.result import AlternativeModel, ResultModel
 from services.point_io import encode_ply
-from services.synthetic import SceneSpec, SyntheticScene, generate_scene
+from services.synthetic import SyntheticScene
 from store.backend import Backend
 from store.keys import Keys
 from tests.service_fixtures import make_settings
@@ -30,11 +30,6 @@ from worker.updates import JobContext, JobTimeoutError, store_result, update_fra
 pytestmark = pytest.mark.timeout(60)
 
 KEYS = Keys("fpj")
-
-
-@pytest.fixture(scope="module")
-def scene() -> SyntheticScene:
-    return generate_scene(SceneSpec.easy(), 0)
 
 
 @pytest.fixture
@@ -89,31 +84,31 @@ def _ctx(settings, client, raw, **kwargs) -> JobContext:
     return JobContext(client, raw, KEYS, settings, settings.pipeline_params(), **kwargs)
 
 
-def test_site_is_laid_out_then_placed_once(setup, scene: SyntheticScene) -> None:
+def test_site_is_laid_out_then_placed_once(setup, easy_scene: SyntheticScene) -> None:
     settings, client, raw = setup
-    _upload(settings, "site", {f.id: encode_ply(f.points) for f in scene.fragments})
+    _upload(settings, "site", {f.id: encode_ply(f.points) for f in easy_scene.fragments})
     consumer = _consumer(settings, client, raw)
     runs = _run_all(consumer)
     # One layout job per fragment, and the placements coalesced: the first placement request
     # enqueues one job; later requests only bump the generation; since every layout finished
     # before it ran, exactly one placement ran.
-    assert runs == len(scene.fragments) + 1
+    assert runs == len(easy_scene.fragments) + 1
     site = client.hgetall(KEYS.site("site"))
     assert site["placement_state"] == "done"
-    assert site["result_generation"] == site["generation"] == str(len(scene.fragments))
+    assert site["result_generation"] == site["generation"] == str(len(easy_scene.fragments))
     result = ResultModel.model_validate_json(client.get(KEYS.result("site")))
     assert result.status == "closed"
-    assert [f.id for f in result.fragments] == [f.id for f in scene.fragments]
-    for fragment in scene.fragments:
+    assert [f.id for f in result.fragments] == [f.id for f in easy_scene.fragments]
+    for fragment in easy_scene.fragments:
         record = client.hgetall(KEYS.fragment("site", fragment.id))
         assert record["state"] == "done" and record["progress"] == "1"
         assert client.exists(KEYS.fragment_layout("site", fragment.id))
     assert client.get(KEYS.placement_flag("site")) is None
 
 
-def test_duplicate_delivery_changes_nothing(setup, scene: SyntheticScene) -> None:
+def test_duplicate_delivery_changes_nothing(setup, easy_scene: SyntheticScene) -> None:
     settings, client, raw = setup
-    fragment = scene.fragments[0]
+    fragment = easy_scene.fragments[0]
     _upload(settings, "site", {fragment.id: encode_ply(fragment.points)})
     job_json = client.xrange(KEYS.jobs)[0][1]["job"]
     consumer = _consumer(settings, client, raw)
@@ -126,9 +121,9 @@ def test_duplicate_delivery_changes_nothing(setup, scene: SyntheticScene) -> Non
     assert client.hget(KEYS.site("site"), "generation") == generation
 
 
-def test_stale_job_of_replaced_bytes_is_ignored(setup, scene: SyntheticScene) -> None:
+def test_stale_job_of_replaced_bytes_is_ignored(setup, easy_scene: SyntheticScene) -> None:
     settings, client, raw = setup
-    fragment = scene.fragments[0]
+    fragment = easy_scene.fragments[0]
     _upload(settings, "site", {fragment.id: encode_ply(fragment.points)})
     stale = LayoutJob(site_id="site", fragment_id=fragment.id, sha256="0" * 64)
     HANDLERS["layout"].run(_ctx(settings, client, raw), stale)
@@ -136,9 +131,9 @@ def test_stale_job_of_replaced_bytes_is_ignored(setup, scene: SyntheticScene) ->
     assert not client.exists(KEYS.fragment_layout("site", fragment.id))
 
 
-def test_writes_never_resurrect_a_deleted_fragment(setup, scene: SyntheticScene) -> None:
+def test_writes_never_resurrect_a_deleted_fragment(setup, easy_scene: SyntheticScene) -> None:
     settings, client, raw = setup
-    fragment = scene.fragments[0]
+    fragment = easy_scene.fragments[0]
     _upload(settings, "site", {fragment.id: encode_ply(fragment.points)})
     sha = client.hget(KEYS.fragment("site", fragment.id), "sha256")
     _delete(settings, "site", fragment.id)
@@ -148,9 +143,9 @@ def test_writes_never_resurrect_a_deleted_fragment(setup, scene: SyntheticScene)
     assert not client.exists(KEYS.fragment_layout("site", fragment.id))
 
 
-def test_layout_past_its_deadline_times_out(setup, scene: SyntheticScene) -> None:
+def test_layout_past_its_deadline_times_out(setup, easy_scene: SyntheticScene) -> None:
     settings, client, raw = setup
-    fragment = scene.fragments[0]
+    fragment = easy_scene.fragments[0]
     _upload(settings, "site", {fragment.id: encode_ply(fragment.points)})
     job = decode_job(client.xrange(KEYS.jobs)[0][1]["job"])
     ctx = _ctx(settings, client, raw, deadline=time.monotonic() - 1)
@@ -168,9 +163,9 @@ def test_older_result_never_overwrites_a_newer_one(setup) -> None:
     assert client.hget(KEYS.site("site"), "result_generation") == "5"
 
 
-def test_placement_waits_for_pending_layouts(setup, scene: SyntheticScene) -> None:
+def test_placement_waits_for_pending_layouts(setup, easy_scene: SyntheticScene) -> None:
     settings, client, raw = setup
-    first, second = scene.fragments[:2]
+    first, second = easy_scene.fragments[:2]
     _upload(settings, "site", {first.id: encode_ply(first.points)})
     consumer = _consumer(settings, client, raw)
     _run_all(consumer)
@@ -187,9 +182,9 @@ def test_placement_waits_for_pending_layouts(setup, scene: SyntheticScene) -> No
     assert [f.id for f in result.fragments] == [first.id, second.id]
 
 
-def test_deleting_every_fragment_clears_the_result(setup, scene: SyntheticScene) -> None:
+def test_deleting_every_fragment_clears_the_result(setup, easy_scene: SyntheticScene) -> None:
     settings, client, raw = setup
-    fragment = scene.fragments[0]
+    fragment = easy_scene.fragments[0]
     _upload(settings, "site", {fragment.id: encode_ply(fragment.points)})
     consumer = _consumer(settings, client, raw)
     _run_all(consumer)
@@ -205,9 +200,9 @@ def _loop_order(result: ResultModel) -> list[str]:
     return [f.id for f in sorted(placed, key=lambda f: f.loop_index or 0)]
 
 
-def test_placement_reads_the_sites_hints(setup, scene: SyntheticScene) -> None:
+def test_placement_reads_the_sites_hints(setup, easy_scene: SyntheticScene) -> None:
     settings, client, raw = setup
-    _upload(settings, "site", {f.id: encode_ply(f.points) for f in scene.fragments})
+    _upload(settings, "site", {f.id: encode_ply(f.points) for f in easy_scene.fragments})
     consumer = _consumer(settings, client, raw)
     _run_all(consumer)
     plain = ResultModel.model_validate_json(client.get(KEYS.result("site")))
@@ -225,10 +220,12 @@ def test_placement_reads_the_sites_hints(setup, scene: SyntheticScene) -> None:
     assert followed or reported, (hinted.status, _loop_order(hinted), hinted.diagnostics)
 
 
-def test_queued_jobs_of_a_deleted_site_do_not_bring_it_back(setup, scene: SyntheticScene) -> None:
+def test_queued_jobs_of_a_deleted_site_do_not_bring_it_back(
+    setup, easy_scene: SyntheticScene
+) -> None:
     settings, client, raw = setup
-    _upload(settings, "site", {f.id: encode_ply(f.points) for f in scene.fragments[:2]})
-    hints = HintsModel(order=[f.id for f in scene.fragments[:2]])
+    _upload(settings, "site", {f.id: encode_ply(f.points) for f in easy_scene.fragments[:2]})
+    hints = HintsModel(order=[f.id for f in easy_scene.fragments[:2]])
     _api(settings, lambda backend: replace_hints(backend, "site", hints))
     kinds = sorted(decode_job(fields["job"]).kind for _, fields in client.xrange(KEYS.jobs))
     assert kinds == ["layout", "layout", "placement"]

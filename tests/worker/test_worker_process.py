@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 from services.point_io import encode_ply
-from services.synthetic import SceneSpec, SyntheticScene, generate_scene
 from store.keys import GROUP
 from tests.service_fixtures import (
     ApiServer,
@@ -25,11 +24,6 @@ from tests.service_fixtures import (
 pytestmark = pytest.mark.timeout(120)
 
 
-@pytest.fixture(scope="module")
-def scene() -> SyntheticScene:
-    return generate_scene(SceneSpec.easy(), 0)
-
-
 def _heavy(points: np.ndarray, copies: int = 40) -> bytes:
     """The fragment's points many times over (jittered): a job that runs long enough to kill."""
     rng = np.random.default_rng(0)
@@ -39,13 +33,13 @@ def _heavy(points: np.ndarray, copies: int = 40) -> bytes:
 
 
 def test_kill_9_in_the_middle_of_a_job(
-    redis_url: str, redis_client: Any, api_factory, start_workers: Workers, scene
+    redis_url: str, redis_client: Any, api_factory, start_workers: Workers, easy_scene
 ) -> None:
     settings = make_settings(redis_url, visibility_timeout_s=2.0)
     workers = start_workers.start(settings, count=2)
     wait_workers_alive(redis_client, "fpj", 2)
     server: ApiServer = api_factory(settings)
-    heavy = scene.fragments[0]
+    heavy = easy_scene.fragments[0]
     key = f"fpj:site:site:frag:{heavy.id}"
     with server.client() as http:
         assert (
@@ -61,10 +55,10 @@ def test_kill_9_in_the_middle_of_a_job(
         assert victim in [w.pid for w in workers]
         # The entry stays pending on the dead consumer until the visibility timeout.
         assert redis_client.xpending("fpj:jobs", GROUP)["pending"] == 1
-        for fragment in scene.fragments[1:]:
+        for fragment in easy_scene.fragments[1:]:
             http.put(f"/v1/sites/site/fragments/{fragment.id}", content=encode_ply(fragment.points))
         result = wait_result(http, "site", timeout=60, status="closed")
-        assert len(result["fragments"]) == len(scene.fragments)
+        assert len(result["fragments"]) == len(easy_scene.fragments)
         record = http.get(f"/v1/sites/site/fragments/{heavy.id}").json()
         assert record["state"] == "done" and record["tries"] == 2
     assert redis_client.xlen("fpj:jobs:dead") == 0
@@ -72,13 +66,13 @@ def test_kill_9_in_the_middle_of_a_job(
 
 
 def test_sigterm_finishes_the_running_job_then_exits(
-    redis_url: str, redis_client: Any, api_factory, start_workers: Workers, scene
+    redis_url: str, redis_client: Any, api_factory, start_workers: Workers, easy_scene
 ) -> None:
     settings = make_settings(redis_url)
     (worker,) = start_workers.start(settings, count=1)
     wait_workers_alive(redis_client, "fpj", 1)
     server: ApiServer = api_factory(settings)
-    heavy = scene.fragments[0]
+    heavy = easy_scene.fragments[0]
     key = f"fpj:site:site:frag:{heavy.id}"
     with server.client() as http:
         http.put(f"/v1/sites/site/fragments/{heavy.id}", content=_heavy(heavy.points))

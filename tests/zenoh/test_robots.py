@@ -15,7 +15,7 @@ from typing import Any
 import pytest
 
 from services.point_io import encode_ply
-from services.synthetic import SceneSpec, generate_scene
+from services.synthetic import SyntheticScene
 from tests.service_fixtures import ply_bytes, wait_until
 from tests.zenoh.conftest import Proc, ZenohService, robot_session
 
@@ -43,11 +43,13 @@ def _robots(http: Any, site: str) -> dict[str, list[str]]:
 
 
 def test_two_robots_send_and_receive_poses(
-    zenoh_service: ZenohService, procs: Callable[[list[str]], Proc], tmp_path: Path
+    zenoh_service: ZenohService,
+    procs: Callable[[list[str]], Proc],
+    tmp_path: Path,
+    easy_scene: SyntheticScene,
 ) -> None:
-    scene = generate_scene(SceneSpec.easy(), 0)
     files = []
-    for fragment in scene.fragments:
+    for fragment in easy_scene.fragments:
         files.append(tmp_path / f"{fragment.id}.ply")
         files[-1].write_bytes(encode_ply(fragment.points))
     (tmp_path / "broken.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\n")
@@ -73,7 +75,7 @@ def test_two_robots_send_and_receive_poses(
     assert ok["fragment_id"] == "frag_02" and ok["created"] is True
     assert error["error"]["code"] == "invalid_fragment"
 
-    ids = {f.id for f in scene.fragments}
+    ids = {f.id for f in easy_scene.fragments}
     received = {
         r: w.wait_for(lambda lines: _closed_poses(lines, ids), 60) for r, w in watchers.items()
     }
