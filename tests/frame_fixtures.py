@@ -48,3 +48,25 @@ def zip_files(files: dict[str, bytes], folder: str = "") -> bytes:
 def frame_zip(frame: RgbdFrame) -> bytes:
     """A frame as the zip archive an upload carries."""
     return zip_files(frame_files(frame))
+
+
+def raw_zip(entries: list[tuple[str, bytes]]) -> bytes:
+    """A zip archive of ``entries`` (name, bytes) as given: names unchecked, duplicates kept."""
+    out = io.BytesIO()
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as archive:
+        for name, data in entries:
+            archive.writestr(zipfile.ZipInfo(name), data, zipfile.ZIP_DEFLATED)
+    return out.getvalue()
+
+
+def zip_bomb(size: int) -> bytes:
+    """A zip with one ``size``-byte entry of zeros (a few MB compressed)."""
+    out = io.BytesIO()
+    block = bytes(1 << 22)
+    with (
+        zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as archive,
+        archive.open("depth.png", "w", force_zip64=True) as entry,
+    ):
+        for _ in range(size // len(block)):
+            entry.write(block)
+    return out.getvalue()
