@@ -67,7 +67,8 @@ def shift_walls(walls: FloatArray, shift: FloatArray) -> FloatArray:
     sx, sy = float(shift[0]), float(shift[1])
     # Row by axis: a wall along x moves its offset by y and its run by x; along y, reversed.
     by_axis = np.array([[0.0, sy, sx, sx], [0.0, sx, sy, sy]])
-    return walls + by_axis[walls[:, 0].astype(np.intp)]
+    shifted: FloatArray = walls + by_axis[walls[:, 0].astype(np.intp)]
+    return shifted
 
 
 def wall_samples(points: FloatArray, spacing: float = SAMPLE_SPACING) -> FloatArray:
