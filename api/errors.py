@@ -25,6 +25,7 @@ from services.errors import (
     JigsawError,
     UnsupportedFormatError,
 )
+from store.connection import redis_reply, storage_refused
 
 __all__ = [
     "ConflictError",
@@ -265,12 +266,10 @@ def storage_error(exc: redis.exceptions.RedisError) -> JigsawError | None:
     """The service error of a Redis failure: StorageFullError for a refused write (maxmemory
     reached, or the append-only file's disk full), UnavailableError for an unreachable Redis;
     None for anything else (a bug, answered 500)."""
-    # A pipeline's error reads "Command # 1 (...) of pipeline caused error: <Redis' reply>",
-    # the reply sometimes as a tuple's repr ("('MISCONF ...',)").
-    text = str(exc).rpartition("of pipeline caused error: ")[2].lstrip("('\"")
+    text = redis_reply(exc)
     if isinstance(exc, redis.exceptions.OutOfMemoryError):
         return StorageFullError(f"storage full: Redis maxmemory reached ({text})")
-    if text.startswith("MISCONF"):
+    if storage_refused(exc):
         return StorageFullError(f"storage full: Redis cannot persist writes ({text})")
     if isinstance(exc, (redis.exceptions.ConnectionError, redis.exceptions.TimeoutError)):
         return UnavailableError(f"storage unavailable: {type(exc).__name__}: {exc}")

@@ -26,6 +26,8 @@ __all__ = [
     "ensure_group_async",
     "hash_fields",
     "record",
+    "redis_reply",
+    "storage_refused",
     "strings",
     "sync_client",
     "wait_for_redis",
@@ -40,6 +42,23 @@ REDIS_DOWN: tuple[type[Exception], ...] = (
     ConnectionError,
     TimeoutError,
 )
+
+
+def redis_reply(exc: redis.exceptions.RedisError) -> str:
+    """Redis' own error reply in ``exc``: a pipeline's error reads "Command # 1 (...) of
+    pipeline caused error: <reply>", the reply sometimes as a tuple's repr."""
+    return str(exc).rpartition("of pipeline caused error: ")[2].lstrip("('\"")
+
+
+def storage_refused(exc: BaseException) -> bool:
+    """True when Redis refuses a write for want of room: its maxmemory is reached (OOM,
+    policy noeviction) or its append-only file cannot be written (MISCONF, a full disk).
+    Nothing stored is lost; writes succeed again once there is room."""
+    if isinstance(exc, redis.exceptions.OutOfMemoryError):
+        return True
+    return isinstance(exc, redis.exceptions.ResponseError) and redis_reply(exc).startswith(
+        "MISCONF"
+    )
 
 
 def sync_client(url: str, *, timeout: float, decode: bool = True) -> redis.Redis:

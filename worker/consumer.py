@@ -25,7 +25,7 @@ from schemas.jobs import DeadLetter, LayoutJob, PlacementJob, decode_job
 from schemas.service import ErrorDetail
 from schemas.settings import Settings
 from services.errors import FragmentError, JigsawError
-from store.connection import REDIS_DOWN, ensure_group, strings
+from store.connection import REDIS_DOWN, ensure_group, storage_refused, strings
 from store.jobs import Extra, ack, dead_letter, retry_later
 from store.keys import GROUP, Keys
 from store.logs import log_fields
@@ -129,6 +129,10 @@ class Consumer:
                 self.stop.wait(backoff)
                 backoff = min(backoff * 2, 5.0)
             except redis.ResponseError as exc:
+                if storage_refused(exc):  # its job stays pending until there is room
+                    log.warning("%s: Redis storage full (%s); retrying in 5s", self.name, exc)
+                    self.stop.wait(5.0)
+                    continue
                 # NOGROUP / UNBLOCKED: the stream was deleted (e.g. Redis lost its data).
                 if not str(exc).startswith(("NOGROUP", "UNBLOCKED")):
                     log.exception("%s: Redis error", self.name)
@@ -219,6 +223,8 @@ class Consumer:
         except REDIS_DOWN:
             raise  # left pending: reclaimed once Redis is back
         except Exception as exc:
+            if storage_refused(exc):
+                raise  # left pending too: not the job's fault, retried once there is room
             self._failed(ctx, job, message_id, raw_job, exc)
         else:
             seconds = time.time() - started
@@ -354,7 +360,8 @@ class Keeper:
         return len(dead)
 
     def beat(self) -> None:
-        """Write the heartbeat and refresh the leases (Redis outages are only logged)."""
+        """Write the heartbeat and refresh the leases (Redis outages and full storage are
+        only logged)."""
         now = time.time()
         try:
             with self.client.pipeline(transaction=False) as pipe:
@@ -367,6 +374,11 @@ class Keeper:
                 pipe.execute()
         except REDIS_DOWN as exc:
             log.warning("%s: heartbeat failed: %s", self.worker_id, exc)
+        except redis.ResponseError as exc:
+            if not storage_refused(exc):
+                raise
+            # Full storage refuses every write; this thread must outlive it to beat again.
+            log.warning("%s: heartbeat refused, Redis storage full: %s", self.worker_id, exc)
 
     def leave(self) -> None:
         """Remove the heartbeat (clean shutdown)."""

@@ -16,8 +16,10 @@ import time
 from collections.abc import Callable
 from types import FrameType
 
+import redis
+
 from schemas.settings import Settings, get_settings
-from store.connection import REDIS_DOWN, ensure_group, sync_client
+from store.connection import REDIS_DOWN, ensure_group, storage_refused, sync_client
 from store.keys import Keys
 from store.logs import configure_logging
 from worker.consumer import BLOCK_MS, Consumer, Keeper, LeaseBook
@@ -55,6 +57,11 @@ def _prepare(settings: Settings, stop: threading.Event) -> None:
         except REDIS_DOWN as exc:
             log.warning("waiting for Redis at %s: %s", settings.redis_url, exc)
             stop.wait(1.0)
+        except redis.ResponseError as exc:
+            if not storage_refused(exc):  # full: even an existing group's XGROUP is refused
+                raise
+            log.warning("waiting for room in Redis at %s: %s", settings.redis_url, exc)
+            stop.wait(5.0)
 
 
 def serve_jobs(settings: Settings, concurrency: int, stop: threading.Event) -> None:

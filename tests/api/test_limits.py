@@ -16,7 +16,14 @@ import pytest
 import redis
 
 from store.backend import Backend, EvictingStorageError
-from tests.service_fixtures import ApiServer, RedisProcess, make_settings, ply_bytes
+from tests.service_fixtures import (
+    ApiServer,
+    RedisProcess,
+    Workers,
+    make_settings,
+    ply_bytes,
+    wait_until,
+)
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -132,6 +139,51 @@ def test_full_storage_is_507_and_keeps_what_is_stored(tmp_path: Path, api_factor
         raw.close()
     finally:
         server_process.stop()
+
+
+def test_workers_wait_for_room_instead_of_failing_jobs(
+    redis_process: RedisProcess, api_factory, start_workers: Workers
+) -> None:
+    """Storage full (this test's own Redis: maxmemory lowered under what it holds) while
+    layout jobs are queued: the worker leaves them pending (no try burnt, nothing
+    dead-lettered, no fragment failed) and runs them once there is room."""
+    settings = make_settings(redis_process.url, max_tries=2)
+    server: ApiServer = api_factory(settings)
+    client = redis.Redis.from_url(redis_process.url, decode_responses=True)
+    with server.client() as http:
+        for k in range(3):
+            data = ply_bytes(2000, seed=k)
+            assert http.put(f"/v1/sites/s/fragments/f{k}", content=data).status_code == 202
+        client.config_set("maxmemory-policy", "noeviction")
+        client.config_set("maxmemory", "1")  # less than it holds: every write refused
+        start_workers.start(settings, count=1)
+        time.sleep(6.5)  # > 2 x visibility timeout: each job would have been tried twice
+        assert client.xlen("fpj:jobs:dead") == 0
+        states = [f["state"] for f in http.get("/v1/sites/s").json()["fragments"]]
+        assert states == ["queued"] * 3, states
+        client.config_set("maxmemory", "0")
+
+        def all_done(site: str) -> bool:
+            fragments = http.get(f"/v1/sites/{site}").json()["fragments"]
+            return all(f["state"] == "done" for f in fragments)
+
+        wait_until(lambda: all_done("s"), 40, 0.5)
+        # Full again while the worker runs jobs: they wait too, and its heartbeat goes on.
+        for k in range(3):
+            data = ply_bytes(2000, seed=10 + k)
+            assert http.put(f"/v1/sites/t/fragments/f{k}", content=data).status_code == 202
+        client.config_set("maxmemory", "1")
+        time.sleep(6.5)
+        client.config_set("maxmemory", "0")
+        wait_until(lambda: all_done("t"), 40, 0.5)
+        assert client.xlen("fpj:jobs:dead") == 0
+        wait_until(
+            lambda: (
+                time.time() - float(client.zrange("fpj:workers", -1, -1, withscores=True)[0][1]) < 2
+            ),
+            10,
+        )
+    client.close()
 
 
 def test_a_redis_that_evicts_is_refused(tmp_path: Path) -> None:
