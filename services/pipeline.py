@@ -358,7 +358,10 @@ def place_site(
     usable = [fid for fid, lay in layouts.items() if lay.ok]
     site_hints = _site_hints(layouts, usable, hints)
     report("placement", 0.1)
-    pieces = {fid: make_piece(fid, layouts[fid]) for fid in _root_first(usable, site_hints)}
+    # The search starts from the smallest id, not the first upload: the same fragments give
+    # the same answer (and site frame) whatever order they arrived in.
+    root_first = _root_first(sorted(usable), site_hints)
+    pieces = {fid: make_piece(fid, layouts[fid]) for fid in root_first}
     placement = place_pieces(list(pieces.values()), params.placement, site_hints)
     if placement is None:
         report("done", 1.0)

@@ -38,6 +38,19 @@ def test_easy_scene_closes_with_accurate_poses():
     assert 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y) > 0  # counter-clockwise
 
 
+def test_the_same_fragments_in_another_order_give_the_same_result():
+    # Fragments arrive in any order over the network; the answer must not depend on it.
+    layouts = scene_layouts("easy", 2, 40_000)
+    forward = place_site(layouts)
+    backward = place_site(dict(reversed(list(layouts.items()))))
+    assert [f.id for f in backward.fragments] == list(reversed(layouts))  # kept as given
+    assert (backward.status, backward.confidence) == (forward.status, forward.confidence)
+    poses = {f.id: np.array(f.pose) for f in forward.fragments}
+    for fragment in backward.fragments:
+        assert np.allclose(np.array(fragment.pose), poses[fragment.id], atol=1e-9)
+    assert np.allclose(backward.floorplan.rooms[0].polygon, forward.floorplan.rooms[0].polygon)
+
+
 def test_floor_is_at_zero_in_the_site_frame():
     scene = small_scene("easy", 2, 40_000)
     result = place_site(scene_layouts("easy", 2, 40_000))
