@@ -29,6 +29,7 @@ import numpy as np
 import pytest
 import redis
 import uvicorn
+from pydantic import SecretStr
 
 from api.main import create_app
 from api.processes import EmbeddedRedis, free_tcp_port
@@ -67,6 +68,9 @@ def settings_env(settings: Settings) -> dict[str, str]:
     for name, value in settings.model_dump(mode="json").items():
         if value is None:
             continue
+        secret = getattr(settings, name)
+        if isinstance(secret, SecretStr):  # dumped as stars
+            value = secret.get_secret_value()
         text = json.dumps(value) if isinstance(value, (list, dict)) else str(value)
         env[f"FPJ_{name.upper()}"] = text
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH", "")) if p)
