@@ -33,3 +33,20 @@ def test_a_sites_keys_are_every_key_named_after_it() -> None:
     assert all(name.startswith("p:site:s") for name in owned)
     assert keys.site_channel("s") not in owned  # a pub/sub channel holds no data
     assert not any(name.startswith("p:site:s:") for name in Keys("p").site_keys("t", ["f1"]))
+
+
+def test_keys_are_namespaced() -> None:
+    keys = Keys("pfx")
+    names = [
+        keys.jobs,
+        keys.dead,
+        keys.workers,
+        keys.sites,
+        keys.site("s"),
+        keys.fragment("s", "f"),
+        keys.fragment_data("s", "f"),
+        keys.result("s"),
+        keys.placement_flag("s"),
+    ]
+    assert all(name.startswith("pfx:") for name in names)
+    assert len(set(names)) == len(names)
