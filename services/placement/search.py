@@ -40,7 +40,7 @@ from services.placement.priors import (
     HintPair,
     SiteHints,
     frame_estimate,
-    position_cost,
+    position_costs,
     robust_cost,
     wrap_angle,
 )
@@ -127,6 +127,8 @@ class _Search:
     junction: FloatArray = field(init=False)  # [a, b]: weighted cost of the two
     frame: FrameEstimate | None = field(init=False)  # the hints frame's yaw, from priors
     rotation_cost: FloatArray = field(init=False)  # [j, r]: prior cost of rotation r
+    # [j, r, q]: that cost with the frame turned q more quarter turns (see _State.anchors)
+    turned_rotation_cost: FloatArray = field(init=False)
     reach: FloatArray = field(init=False)  # [j, d]: piece j's reach along direction d
     chain_ends: FloatArray = field(init=False)  # [j, r]: piece j's target at rotation r
     displacement: list[list[tuple[FloatArray, FloatArray]]] = field(init=False)  # [in][out]
@@ -149,6 +151,8 @@ class _Search:
         self.junction = cost
         self.frame = frame_estimate(self.pieces[0].id, self.hints.priors) if self.pieces else None
         self.rotation_cost = _rotation_costs(self.pieces, self.hints, self.frame)
+        quarters = (np.arange(4)[:, None] + np.arange(4)[None, :]) % 4  # [r, q] -> r + q
+        self.turned_rotation_cost = self.rotation_cost[:, quarters]
         self.displacement = [
             [junction_displacement(self.noise, h_in, h_out) for h_out in range(4)]
             for h_in in range(4)
@@ -222,11 +226,12 @@ def _pair_evidence(
 def _rotation_costs(
     pieces: Sequence[Piece], hints: SiteHints, frame: FrameEstimate | None
 ) -> FloatArray:
-    """[j, r]: prior cost of piece j at rotation r in the site frame."""
+    """[j, r]: prior cost of piece j at rotation r in the site frame (the first piece's
+    too: which quarter turn the frame has is the assembly's to say, see _State.anchors)."""
     costs = np.zeros((len(pieces), 4))
     if frame is None:
         return costs
-    for j, piece in enumerate(pieces[1:], start=1):
+    for j, piece in enumerate(pieces):
         prior = hints.priors.get(piece.id)
         if prior is None:
             continue
@@ -237,17 +242,29 @@ def _rotation_costs(
     return costs
 
 
-def _anchor(search: _Search, j: int, source: FloatArray) -> tuple[float, float, float] | None:
-    """Piece j's prior against its placed source (site frame), for :func:`position_cost`."""
+def _anchor(
+    search: _Search,
+    j: int,
+    source: FloatArray,
+    drift_mean: FloatArray,
+    drift_var: FloatArray,
+) -> tuple[float, float, float, float, float] | None:
+    """Piece j's prior against its placed source (site frame), for :func:`position_costs`.
+
+    ``source`` is where the end-to-end concatenation puts it; the junctions on the way
+    hide displacements (overlaps, gaps) that add up to ``drift_mean`` and ``drift_var``
+    (per axis), so the source really lies there give or take that much.
+    """
     frame, prior = search.frame, search.hints.priors.get(search.pieces[j].id)
     if frame is None or prior is None:
         return None
     c, s = np.cos(frame.yaw), np.sin(frame.yaw)
-    turned = np.array([[c, -s], [s, c]]) @ source
+    turned = np.array([[c, -s], [s, c]]) @ (source + drift_mean)
     # The frame's yaw is uncertain: the further from the first piece, the more it moves.
     variance = prior.source_sigma**2 + float(source @ source) * frame.variance
-    dx, dy = (prior.source - turned).tolist()
-    return (dx, dy, 1.0 / variance)
+    variance += float(drift_var.mean())  # isotropic: the drift's axes turn into the hints'
+    (px, py), (tx, ty) = prior.source.tolist(), turned.tolist()
+    return (px, py, tx, ty, 1.0 / variance)
 
 
 @dataclass(frozen=True)
@@ -267,8 +284,11 @@ class _State:
     box: tuple[float, float, float, float]  # their bounds (x_lo, y_lo, x_hi, y_hi)
     violated: tuple[int, ...] = ()  # indices of broken hint pairs
     resolved: frozenset[int] = frozenset()  # hint pairs already decided
-    rotation_prior: float = 0.0  # prior cost of the placed pieces' rotations
-    anchors: tuple[tuple[float, float, float], ...] = ()  # see priors.position_cost
+    # The priors' costs per quarter turn q of the frame: the frame estimate takes its turn
+    # from the first piece's prior, which may be off by more than 45 degrees; the assembly
+    # with most priors on its side decides. (4,) cost of the placed pieces' rotations:
+    rotation_prior: FloatArray = field(default_factory=lambda: np.zeros(4))
+    anchors: tuple[tuple[float, float, float, float, float], ...] = ()  # priors.position_costs
 
     def energy(self, weights: FloatArray) -> float:
         return float(weights @ self.features)
@@ -391,10 +411,11 @@ def _extend(search: _Search, state: _State, j: int, turn: int) -> _State | None:
     features[_F["boundary"]] += search.boundary[prev, j]
     box = _box(samples)
     features[_F["conflict"]] += _conflict(search, state, j, rotation, samples, box)
-    rotations_cost = state.rotation_prior + search.rotation_cost[j, rotation]
-    anchor = _anchor(search, j, state.end)
+    rotations_cost = state.rotation_prior + search.turned_rotation_cost[j, rotation]
+    anchor = _anchor(search, j, state.end, state.mean + mean, state.var + var)
     anchors = state.anchors if anchor is None else (*state.anchors, anchor)
-    features[_F["prior"]] = rotations_cost + position_cost(anchors)
+    if search.frame is not None:
+        features[_F["prior"]] = float((rotations_cost + position_costs(anchors)).min())
     child = _State(
         order=(*state.order, j),
         rotations=(*state.rotations, rotation),
@@ -585,6 +606,9 @@ def _root(search: _Search) -> _State:
     first = search.pieces[0]
     pts, walls, samples = first.rotated[0]
     trimmed = _trim_start(walls, pts[0], search.params.closure_overshoot)
+    rotation_prior = search.turned_rotation_cost[0, 0].copy()
+    features = np.zeros(len(FEATURES))
+    features[_F["prior"]] = rotation_prior.min()
     return _State(
         order=(0,),
         rotations=(0,),
@@ -592,14 +616,17 @@ def _root(search: _Search) -> _State:
         end=pts[-1].copy(),
         heading=first.directions[-1],
         turning=first.turning,
-        features=np.zeros(len(FEATURES)),
+        features=features,
         mean=np.zeros(2),
         var=np.zeros(2),
         walls=trimmed,
         vertices=pts.copy(),
         samples=samples,
         box=_box(samples),
-        anchors=tuple(a for a in (_anchor(search, 0, np.zeros(2)),) if a is not None),
+        rotation_prior=rotation_prior,
+        anchors=tuple(
+            a for a in (_anchor(search, 0, np.zeros(2), np.zeros(2), np.zeros(2)),) if a is not None
+        ),
     )
 
 

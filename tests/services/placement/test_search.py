@@ -355,6 +355,22 @@ def test_priors_pick_the_right_one_of_two_tied_rooms(l_room, frame):
     assert runner_up.energy > placement.best.energy + 1.0
 
 
+def test_priors_pick_the_right_room_when_the_first_pieces_yaw_is_far_off(l_room):
+    # The first piece's prior is turned by 60 degrees: its quarter turn points the wrong
+    # way. The other three priors, and the assembly they agree with, still decide.
+    turns = [0, 1, 2, 3]
+    pieces = chains_from_polygon(l_room, TIED_CUTS, turns)
+    hints = _truth_priors(l_room, TIED_CUTS, turns)
+    first = hints.priors["p0"]
+    off = dataclasses.replace(first, yaw=first.yaw + math.radians(60.0))
+    placement = place_pieces(pieces, GEOMETRY, SiteHints(priors={**hints.priors, "p0": off}))
+    assert placement is not None
+    assert placement.best.order == ("p0", "p1", "p2", "p3")
+    assert list(placement.best.rotations) == [0, 3, 2, 1]
+    # The far-off prior costs about what a Cauchy loss gives one outlier, no more.
+    assert placement.best.features["prior"] < 4.0
+
+
 def test_priors_pick_the_assignment_of_identical_pieces():
     # Which of four identical pieces goes where is only known from the priors.
     square = np.array([[0, 0], [4, 0], [4, 4], [0, 4]], dtype=np.float64)
