@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 
 from services.types import FloatArray
 
-__all__ = ["distance_to_polygon", "points_in_polygon", "signed_area"]
+__all__ = ["distance_to_polygon", "is_simple_rectilinear", "points_in_polygon", "signed_area"]
 
 BoolArray = NDArray[np.bool_]
 
@@ -73,3 +73,36 @@ def distance_to_polygon(xy: FloatArray, polygon: FloatArray) -> FloatArray:
     nearest = ap - t[..., None] * ab
     distance: FloatArray = np.sqrt((nearest**2).sum(-1)).min(axis=1)
     return distance
+
+
+def is_simple_rectilinear(polygon: FloatArray, tolerance: float = 0.01) -> bool:
+    """True when every edge of a (V, 2) polygon runs along x or y (within ``tolerance``
+    meters across) and no two edges that do not share a vertex touch or cross.
+
+    A Manhattan room's boundary is such a polygon; one that is not was joined from chains
+    that do not fit, however well its loop closed.
+
+    >>> square = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
+    >>> is_simple_rectilinear(square)
+    True
+    >>> is_simple_rectilinear(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [1.0, 3.0]]))
+    False
+    >>> bowtie = np.array([[0, 0], [2, 0], [2, 1], [1, 1], [1, -1], [0, -1]], dtype=float)
+    >>> is_simple_rectilinear(bowtie)
+    False
+    """
+    n = len(polygon)
+    if n < 4:
+        return False
+    start, end = polygon, np.roll(polygon, -1, axis=0)
+    delta = np.abs(end - start)
+    if np.any(delta.min(axis=1) > tolerance):
+        return False
+    lo, hi = np.minimum(start, end), np.maximum(start, end)
+    # Boxes of two edges overlapping (by more than the tolerance on both axes) means the
+    # edges touch or cross; an edge's own neighbours share a vertex with it and are exempt.
+    overlap = (np.minimum(hi[:, None], hi[None]) - np.maximum(lo[:, None], lo[None])).min(axis=2)
+    index = np.arange(n)
+    gap = np.abs(index[:, None] - index[None])
+    distant = (gap > 1) & (gap < n - 1)
+    return not bool(np.any(distant & (overlap > -tolerance)))

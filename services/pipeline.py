@@ -28,6 +28,7 @@ from schemas.result import (
 from services.confidence import Assembly, fragment_confidences, rank_assemblies
 from services.fragments import Fragment, fragment_layout, fragment_points
 from services.frame_merge import FrameGroup, expand_frame_groups, group_frames, group_layout
+from services.geometry import is_simple_rectilinear
 from services.layout_model import build_polygon
 from services.local_layout import estimate_local_layout
 from services.placement import (
@@ -156,6 +157,8 @@ def _concrete(
         and refined.violation_after <= params.placement.closure_tolerance
     ):
         polygon = build_polygon(ordered, cand.rotations, refined.translations)
+        if not is_simple_rectilinear(polygon):
+            polygon = None  # chains that do not fit: a wall runs askew or crosses another
     return _Placed(assembly, cand, refined, poses, polygon)
 
 
@@ -286,10 +289,16 @@ def _choose(
             layouts, pieces, placement.best, placement.translations, params, placement.measured
         )
         return main, [], []
-    concrete = [
-        _concrete(layouts, pieces, a.candidate, a.translations, params, placement.measured, a)
-        for a in assemblies[: params.placement.max_alternatives + 1]
-    ]
+    wanted = params.placement.max_alternatives + 1
+    concrete: list[_Placed] = []
+    # Assemblies whose chains do not make a room (no polygon) are passed over; a few more
+    # than are reported are looked at, so that those do not crowd out the ones that do.
+    for a in assemblies[: 3 * wanted]:
+        concrete.append(
+            _concrete(layouts, pieces, a.candidate, a.translations, params, placement.measured, a)
+        )
+        if sum(c.polygon is not None for c in concrete) >= wanted:
+            break
     closing = [c for c in concrete if c.polygon is not None]
     if not closing:
         return concrete[0], [], assemblies

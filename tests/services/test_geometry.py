@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from services.geometry import distance_to_polygon, points_in_polygon
+from services.geometry import distance_to_polygon, is_simple_rectilinear, points_in_polygon
 
 L_ROOM = np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], dtype=np.float64)
 SLANTED = np.array([[0, 0], [6, 1], [5, 5], [1, 4]], dtype=np.float64)
@@ -28,3 +28,22 @@ def test_distance_matches_dense_boundary_sampling(polygon):
 def test_inside_test_on_an_l_shaped_room():
     points = np.array([[1.0, 1.0], [7.0, 2.0], [7.0, 5.0], [-1.0, 1.0], [4.0, 5.5]])
     assert points_in_polygon(points, L_ROOM).tolist() == [True, True, False, False, True]
+
+
+@pytest.mark.parametrize(
+    ("polygon", "valid"),
+    [
+        (L_ROOM, True),
+        (L_ROOM[::-1], True),  # clockwise: still a room's outline
+        (L_ROOM + np.array([[0, 0], [0, 0], [0, 0.005], [0, 0.005], [0, 0], [0, 0]]), True),
+        # A corner chain missed: one wall runs askew across the notch.
+        (np.delete(L_ROOM, 3, axis=0), False),
+        # Two walls of the loop cross (a piece folded back over another).
+        (np.array([[0, 0], [4, 0], [4, 2], [1, 2], [1, -1], [0, -1]], dtype=np.float64), False),
+        # Two parallel walls on one line, touching: no room between them.
+        (np.array([[0, 0], [4, 0], [4, 1], [2, 1], [2, 0], [1, 0], [1, 1], [0, 1]], float), False),
+        (L_ROOM[:3], False),
+    ],
+)
+def test_is_simple_rectilinear(polygon, valid):
+    assert is_simple_rectilinear(polygon) is valid
