@@ -84,6 +84,7 @@ class Outcome:
 
     @property
     def bucket(self) -> str:
+        """The scene's fragment-count bucket, e.g. "6-8"."""
         return bucket_of(self.n)
 
 

@@ -232,6 +232,7 @@ def closed_threshold(counts: np.ndarray, conf: np.ndarray, right: np.ndarray) ->
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Fit the energy's weights and the confidence on the tune split; returns the exit code."""
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--per-bucket", type=int, default=24)
     parser.add_argument("--real", type=int, default=48)

@@ -62,6 +62,7 @@ class JunctionNoise:
 
     @classmethod
     def from_params(cls, params: PlacementParams) -> JunctionNoise:
+        """The model the placement parameters describe."""
         return cls(
             params.junction_mean,
             params.junction_sigma,
