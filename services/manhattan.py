@@ -102,10 +102,14 @@ def _ransac_plane(
     normals, triples = normals[length > 1e-12], triples[length > 1e-12]
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     offsets = -np.einsum("ij,ij->i", normals, triples[:, 0])
+    # Candidates are only ranked here, so single precision (twice the speed) is enough;
+    # the winner's inliers are counted again in double precision below.
+    homogeneous = np.column_stack([points, np.ones(len(points))]).astype(np.float32)
+    planes = np.column_stack([normals, offsets]).astype(np.float32)
     counts = np.zeros(len(normals), dtype=np.int64)
     for lo in range(0, len(normals), _RANSAC_CHUNK):
-        hi = lo + _RANSAC_CHUNK
-        counts[lo:hi] = (np.abs(points @ normals[lo:hi].T + offsets[lo:hi]) < distance).sum(0)
+        distances = homogeneous @ planes[lo : lo + _RANSAC_CHUNK].T
+        counts[lo : lo + _RANSAC_CHUNK] = np.count_nonzero(np.abs(distances) < distance, axis=0)
     if len(counts) == 0:
         return np.array([0.0, 0.0, 1.0]), np.zeros(len(points), dtype=bool)
     best = int(np.argmax(counts))
@@ -216,18 +220,27 @@ def _estimate_yaw(levelled_normals: FloatArray) -> tuple[float, float]:
     return yaw, support
 
 
-def _sharpness(values: FloatArray, bin_size: float = 0.02) -> float:
-    """Sum of squared histogram counts: large when the values pile up on few levels.
+def _sharpness(values: FloatArray, bin_size: float = 0.02) -> FloatArray:
+    """Sum of squared histogram counts per column: large when the values pile up on few levels.
 
-    Two histograms half a bin apart are summed, so a level sitting on a bin edge scores
-    like one in a bin's middle (no aliasing between nearby candidate rotations).
+    values: (P, C) float64, one column per candidate rotation (all scored in one bincount
+    rather than a Python loop over candidates). Two histograms half a bin apart are summed,
+    so a level sitting on a bin edge scores like one in a bin's middle (no aliasing between
+    nearby candidate rotations). Returns (C,) float64; zeros for no values.
     """
+    n_cols = values.shape[1]
+    total = np.zeros(n_cols)
     if len(values) == 0:
-        return 0.0
-    total = 0.0
+        return total
+    scaled = values / bin_size
     for shift in (0.0, 0.5):
-        idx = np.floor(values / bin_size + shift).astype(np.int64)
-        total += float(np.sum(np.bincount(idx - idx.min()).astype(np.float64) ** 2))
+        idx = np.floor(scaled + shift).astype(np.int32)
+        # One offset for all columns: the sum of squares does not depend on it.
+        low = int(idx.min())
+        width = int(idx.max()) - low + 1
+        idx += (width * np.arange(n_cols, dtype=np.int32) - low)[None, :]
+        counts = np.bincount(idx.ravel(), minlength=width * n_cols).reshape(n_cols, width)
+        total += np.einsum("ij,ij->i", counts, counts).astype(np.float64)
     return total
 
 
@@ -247,9 +260,11 @@ def _sharpen_tilt(aligned: FloatArray, normals: FloatArray) -> FloatArray:
     if len(flat) + len(wall_x) + len(wall_y) < 100:
         return np.eye(3)
 
-    def score(a: float, b: float) -> float:
-        rot = _small_rotation(a, b)
-        return _sharpness(flat @ rot[2]) + _sharpness(wall_x @ rot[0]) + _sharpness(wall_y @ rot[1])
+    def best(alphas: FloatArray, betas: FloatArray) -> int:
+        """Index of the sharpest of the candidate (alpha, beta) pairs."""
+        rot = _small_rotations(alphas, betas)  # (C, 3, 3)
+        score = _sharpness(flat @ rot[:, 2].T) + _sharpness(wall_x @ rot[:, 0].T)
+        return int(np.argmax(score + _sharpness(wall_y @ rot[:, 1].T)))
 
     alpha = beta = 0.0
     # Coarse to fine: 0.1 degree steps over +-1 degree, then 0.01 over +-0.1.
@@ -257,9 +272,10 @@ def _sharpen_tilt(aligned: FloatArray, normals: FloatArray) -> FloatArray:
         np.radians(np.arange(-1.0, 1.0001, 0.1)),
         np.radians(np.arange(-0.1, 0.1001, 0.01)),
     ):
+        fixed = np.ones_like(steps)
         for _ in range(2):
-            alpha = float(max(alpha + steps, key=lambda a: score(a, beta)))
-            beta = float(max(beta + steps, key=lambda b: score(alpha, b)))
+            alpha = float(alpha + steps[best(alpha + steps, beta * fixed)])
+            beta = float(beta + steps[best(alpha * fixed, beta + steps)])
     return _small_rotation(alpha, beta)
 
 
@@ -270,12 +286,19 @@ def _subsample(values: FloatArray, limit: int) -> FloatArray:
     return sub
 
 
+def _small_rotations(alpha: FloatArray, beta: FloatArray) -> FloatArray:
+    """(C, 3, 3) rotations about x by alpha, then about y by beta (both (C,))."""
+    ca, sa, cb, sb = np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta)
+    zero, one = np.zeros_like(alpha), np.ones_like(alpha)
+    rx = np.stack([one, zero, zero, zero, ca, -sa, zero, sa, ca], axis=1).reshape(-1, 3, 3)
+    ry = np.stack([cb, zero, sb, zero, one, zero, -sb, zero, cb], axis=1).reshape(-1, 3, 3)
+    out: FloatArray = ry @ rx
+    return out
+
+
 def _small_rotation(alpha: float, beta: float) -> FloatArray:
     """Rotation about x by alpha, then about y by beta."""
-    ca, sa, cb, sb = np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta)
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, ca, -sa], [0.0, sa, ca]])
-    ry = np.array([[cb, 0.0, sb], [0.0, 1.0, 0.0], [-sb, 0.0, cb]])
-    out: FloatArray = ry @ rx
+    out: FloatArray = _small_rotations(np.array([alpha]), np.array([beta]))[0]
     return out
 
 
@@ -292,15 +315,15 @@ def _sharpen_yaw(
         return yaw
     walls = _subsample(walls - walls.mean(axis=0), _SHARPEN_POINTS)
 
-    def score(angle: float) -> float:
-        c, s = np.cos(angle), np.sin(angle)
-        return _sharpness(walls @ np.array([c, s])) + _sharpness(walls @ np.array([-s, c]))
+    def score(angles: FloatArray) -> FloatArray:
+        c, s = np.cos(angles), np.sin(angles)
+        return _sharpness(walls @ np.stack([c, s])) + _sharpness(walls @ np.stack([-s, c]))
 
     best = yaw
     for step in (0.25, 0.025):
         span = span_deg if step > 0.1 else 0.35
         candidates = best + np.radians(np.arange(-span, span + 1e-9, step))
-        best = float(max(candidates, key=score))
+        best = float(candidates[int(np.argmax(score(candidates)))])
     return best
 
 
