@@ -28,6 +28,7 @@ __all__ = ["OrientedCloud", "estimate_manhattan_frame", "thin_with_normals"]
 _NORMAL_RADIUS = 3.0  # neighbourhood radius for normals, in voxel sizes
 _RANSAC_CHUNK = 64  # candidate planes scored per matrix product (bounds memory)
 _SHARPEN_POINTS = 12_000  # points used by the fine tilt and yaw search
+_DEGENERATE_GAP = 0.05  # up is ambiguous when its scatter eigenvalue leads by less than this
 _MIN_CEILING_CLEARANCE = 1.8  # m; a horizontal surface lower than this over the floor is furniture
 
 
@@ -125,8 +126,18 @@ def _fit_plane(points: FloatArray) -> tuple[FloatArray, FloatArray]:
     return centre, normal
 
 
-def _estimate_up(normals: FloatArray, max_tilt_deg: float, start: FloatArray) -> FloatArray:
-    """Up axis: aligned with horizontal-surface normals, orthogonal to wall normals."""
+def _estimate_up(
+    normals: FloatArray,
+    max_tilt_deg: float,
+    start: FloatArray,
+    level_axis: FloatArray | None = None,
+) -> FloatArray:
+    """Up axis: aligned with horizontal-surface normals, orthogonal to wall normals.
+
+    When these leave up ambiguous within a plane (one wall family, no floor), it is the
+    direction in that plane orthogonal to ``level_axis`` if given, else the closest to the
+    current estimate.
+    """
     up = start
     # Each pass narrows the cones around the current estimate, so clutter drops out.
     for cone_deg in (max_tilt_deg, 15.0, 8.0):
@@ -140,14 +151,35 @@ def _estimate_up(normals: FloatArray, max_tilt_deg: float, start: FloatArray) ->
             scatter -= vertical.T @ vertical / len(vertical)
         if not scatter.any():
             break
-        _, vectors = np.linalg.eigh(scatter)
+        values, vectors = np.linalg.eigh(scatter)
         candidate = vectors[:, -1]
+        if values[-1] - values[-2] < _DEGENERATE_GAP:
+            # One wall family and no floor (a frame facing a single wall): any direction in
+            # the wall plane fits, and eigh would pick one by noise.
+            candidate = _in_plane(vectors[:, -2:], up, level_axis, candidate)
         candidate = candidate if candidate[2] >= 0 else -candidate
         if np.degrees(np.arccos(np.clip(candidate[2], -1.0, 1.0))) > max_tilt_deg:
             break
         up = candidate
     unit: FloatArray = up / np.linalg.norm(up)
     return unit
+
+
+def _in_plane(
+    plane: FloatArray, up: FloatArray, level_axis: FloatArray | None, fallback: FloatArray
+) -> FloatArray:
+    """The unit direction in the span of ``plane``'s two columns orthogonal to
+    ``level_axis`` (a camera's x axis: its roll is small, its pitch is not), else the one
+    closest to ``up``; ``fallback`` when neither is defined."""
+    if level_axis is not None:
+        coefficients = np.array([plane[:, 1] @ level_axis, -(plane[:, 0] @ level_axis)])
+        if np.linalg.norm(coefficients) > 0.1:  # the plane does not hold the hint
+            direction: FloatArray = plane @ coefficients
+            direction /= np.linalg.norm(direction)
+            return direction if direction @ up >= 0 else -direction
+    projected: FloatArray = plane @ (plane.T @ up)
+    length = float(np.linalg.norm(projected))
+    return projected / length if length > 1e-6 else fallback
 
 
 def _refine_up_on_floor(cloud: OrientedCloud, up: FloatArray) -> FloatArray:
@@ -260,11 +292,14 @@ def _sharpen_tilt(aligned: FloatArray, normals: FloatArray) -> FloatArray:
     if len(flat) + len(wall_x) + len(wall_y) < 100:
         return np.eye(3)
 
-    def best(alphas: FloatArray, betas: FloatArray) -> int:
-        """Index of the sharpest of the candidate (alpha, beta) pairs."""
+    def best(alphas: FloatArray, betas: FloatArray, steps: FloatArray) -> float:
+        """The step to the sharpest of the candidate (alpha, beta) pairs; of equals the
+        smallest (a tilt the points do not see, as about a lone wall's normal, stays put)."""
         rot = _small_rotations(alphas, betas)  # (C, 3, 3)
         score = _sharpness(flat @ rot[:, 2].T) + _sharpness(wall_x @ rot[:, 0].T)
-        return int(np.argmax(score + _sharpness(wall_y @ rot[:, 1].T)))
+        score += _sharpness(wall_y @ rot[:, 1].T)
+        ties = np.flatnonzero(score == score.max())
+        return float(steps[ties[np.argmin(np.abs(steps[ties]))]])
 
     alpha = beta = 0.0
     # Coarse to fine: 0.1 degree steps over +-1 degree, then 0.01 over +-0.1.
@@ -274,8 +309,8 @@ def _sharpen_tilt(aligned: FloatArray, normals: FloatArray) -> FloatArray:
     ):
         fixed = np.ones_like(steps)
         for _ in range(2):
-            alpha = float(alpha + steps[best(alpha + steps, beta * fixed)])
-            beta = float(beta + steps[best(alpha * fixed, beta + steps)])
+            alpha += best(alpha + steps, beta * fixed, steps)
+            beta += best(alpha * fixed, beta + steps, steps)
     return _small_rotation(alpha, beta)
 
 
@@ -364,7 +399,9 @@ def _refine_level(heights: FloatArray, level: float) -> float:
 
 
 def estimate_manhattan_frame(
-    cloud: OrientedCloud, params: ManhattanParams = ManhattanParams()
+    cloud: OrientedCloud,
+    params: ManhattanParams = ManhattanParams(),
+    level_axis: FloatArray | None = None,
 ) -> ManhattanFrame:
     """Estimate the rotation aligning a fragment to its Manhattan axes.
 
@@ -372,6 +409,8 @@ def estimate_manhattan_frame(
     ----------
     cloud : thinned fragment with normals (see :func:`thin_with_normals`), local frame.
     params : plane-search settings; ``max_tilt_deg`` bounds how far up may be from +z.
+    level_axis : (3,) optional local direction known to be about level (an RGB-D camera's x
+        axis); it settles the up axis when the walls alone leave it open (one wall, no floor).
 
     Returns
     -------
@@ -384,7 +423,7 @@ def estimate_manhattan_frame(
         return ManhattanFrame(rotation=np.eye(3), floor_z=0.0, ceiling_z=None)
     plane = _floor_plane_normal(cloud, params)
     start = plane if plane is not None else np.array([0.0, 0.0, 1.0])
-    up = _estimate_up(cloud.normals, params.max_tilt_deg, start)
+    up = _estimate_up(cloud.normals, params.max_tilt_deg, start, level_axis)
     up = _refine_up_on_floor(cloud, up)
     tilt = _minimal_tilt_rotation(up)
     levelled = cloud.normals @ tilt.T

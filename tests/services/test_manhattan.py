@@ -49,6 +49,35 @@ def test_floor_only_fragment_keeps_a_valid_frame():
     assert frame.floor_z == pytest.approx(0.0, abs=0.03)
 
 
+def test_single_wall_without_floor_keeps_the_up_closest_to_the_start():
+    # A frame facing one wall, pitched down 15 degrees, sees no floor: the wall fixes the
+    # pitch, nothing fixes the roll about its normal, so up is the start (+z) projected
+    # onto the wall plane rather than a direction in it picked by noise.
+    rng = np.random.default_rng(3)
+    pitch = np.radians(15.0)
+    normal = np.array([np.cos(pitch), 0.0, np.sin(pitch)])
+    up_true = np.array([-np.sin(pitch), 0.0, np.cos(pitch)])
+    along, height = rng.uniform(-2.0, 2.0, 20_000), rng.uniform(-1.2, 1.2, 20_000)
+    wall = 2.0 * normal + np.outer(along, [0.0, 1.0, 0.0]) + np.outer(height, up_true)
+    wall += rng.normal(0.0, 0.005, wall.shape)
+    frame = estimate_manhattan_frame(thin_with_normals(wall, ManhattanParams()))
+    assert frame.rotation[2] @ up_true > np.cos(np.radians(1.0))
+    # Seen obliquely, the roll about the wall's normal is open: a camera's x axis, known to
+    # be about level, settles it (the level start alone would leave part of the pitch).
+    yaw = np.radians(40.0)
+    turn = np.array([[np.cos(yaw), -np.sin(yaw), 0.0], [np.sin(yaw), np.cos(yaw), 0.0], [0, 0, 1]])
+    pitch_down = np.array(
+        [[1.0, 0, 0], [0, np.cos(pitch), np.sin(pitch)], [0, -np.sin(pitch), np.cos(pitch)]]
+    )
+    level = pitch_down @ turn  # world -> camera level frame (x right, y forward, z up)
+    upright = np.array([0.0, 1.0, 0.0]) * 2.5  # a wall at y = 2.5 in the world, facing -y
+    world = upright + np.column_stack([along, np.zeros_like(along), height])
+    oblique = world @ level.T + rng.normal(0.0, 0.005, world.shape)
+    cloud = thin_with_normals(oblique, ManhattanParams())
+    hinted = estimate_manhattan_frame(cloud, ManhattanParams(), level_axis=np.array([1.0, 0, 0]))
+    assert hinted.rotation[2] @ (level @ [0.0, 0.0, 1.0]) > np.cos(np.radians(1.0))
+
+
 def test_empty_cloud_gives_identity():
     frame = estimate_manhattan_frame(thin_with_normals(np.zeros((0, 3)), ManhattanParams()))
     assert np.array_equal(frame.rotation, np.eye(3))
