@@ -7,7 +7,12 @@ import numpy as np
 import pytest
 
 from schemas.params import PipelineParams
-from services.frame_layout import _flatten_furniture, _floor, _to_frustum_edges
+from services.frame_layout import (
+    _flatten_corner_fronts,
+    _flatten_furniture,
+    _floor,
+    _to_frustum_edges,
+)
 from services.frustum import CameraView, in_any_view, side_rays
 from services.synthetic.render import KINECT
 from services.wall_lines import WallLine
@@ -72,6 +77,25 @@ def _line(offset: float, travel: int, axis: int = 0) -> WallLine:
         seen_through=np.zeros(cells, dtype=bool),
         occupied=np.zeros(cells, dtype=bool),
     )
+
+
+def test_a_shallow_front_in_a_corner_gives_the_corner_back_unless_its_side_was_seen() -> None:
+    # Up the wall x = 2, onto a wardrobe front 0.7 m before the wall y = 5.7, back out to it
+    # along the wardrobe's unseen side (a deduced line) and on along y = 5.7.
+    chain = np.array([[2.0, 3.0], [2.0, 5.0], [0.6, 5.0], [0.6, 5.7], [-1.0, 5.7]])
+    side = WallLine(**{**_line(0.6, 1, axis=1).__dict__, "virtual": True})
+    corner = [[2.0, 3.0], [2.0, 5.7], [-1.0, 5.7]]
+    np.testing.assert_allclose(_flatten_corner_fronts(chain, [side]), corner)
+    # The same front at the chain's far corner (walked the other way round).
+    far = np.array([[1.0, 3.7], [-0.3, 3.7], [-0.3, 3.0], [-2.5, 3.0], [-2.5, 2.0]])
+    far_side = WallLine(**{**_line(-0.3, -1, axis=1).__dict__, "virtual": True})
+    expected = [[1.0, 3.7], [-2.5, 3.7], [-2.5, 2.0]]
+    np.testing.assert_allclose(_flatten_corner_fronts(far, [far_side]), expected)
+    # A step whose side wall was seen is the room's own; a deep one too.
+    np.testing.assert_allclose(_flatten_corner_fronts(chain, [_line(0.6, 1, axis=1)]), chain)
+    deep = chain.copy()
+    deep[1:3, 1] = 4.5
+    np.testing.assert_allclose(_flatten_corner_fronts(deep, [side]), deep)
 
 
 def test_chain_ends_move_out_to_the_frustum_edges_unless_a_wall_turns() -> None:
