@@ -69,9 +69,9 @@ async def check_upload_rate(backend: Backend, client_id: str) -> None:
 
 class RequestTimeout:
     """ASGI middleware: a request whose response has not started after ``seconds`` is
-    cancelled and answered 408 (its body was still arriving: a slow or stalled sender) or
-    503 (it arrived, but no answer came in time). A response that has started (an event
-    stream, a large download) runs on."""
+    cancelled and answered 408 (the service was waiting for more of its body: a slow or
+    stalled sender) or 503 (the service itself was slow: Redis, parsing). A response that
+    has started (an event stream, a large download) runs on."""
 
     def __init__(self, app: ASGIApp, seconds: float) -> None:
         self.app, self.seconds = app, seconds
@@ -82,14 +82,15 @@ class RequestTimeout:
             await self.app(scope, receive, send)
             return
         started = asyncio.Event()
-        body_done = False
+        reading = False  # the app waits for more of the body: the sender is the slow one
 
         async def receive_counted() -> Message:
-            nonlocal body_done
-            message = await receive()
-            if message["type"] == "http.request" and not message.get("more_body", False):
-                body_done = True
-            return message
+            nonlocal reading
+            reading = True
+            try:
+                return await receive()
+            finally:
+                reading = False
 
         async def send_marked(message: Message) -> None:
             if message["type"] == "http.response.start":
@@ -105,6 +106,7 @@ class RequestTimeout:
         if task.done() or started.is_set():
             await task  # finished, or answering: a started response is never cut short
             return
+        slow_sender = reading
         task.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await task
@@ -112,8 +114,8 @@ class RequestTimeout:
             return  # it began answering while being cancelled: nothing more to send
         message = f"no response within {self.seconds:g} s"
         error = (
-            ProcessingTimeoutError(message)
-            if body_done
-            else RequestTimeoutError(f"{message}: the request body was still arriving")
+            RequestTimeoutError(f"{message}: the request body was still arriving")
+            if slow_sender
+            else ProcessingTimeoutError(message)
         )
         await jigsaw_response(error)(scope, receive, send)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import signal
 import socket
 import time
 import zlib
@@ -225,3 +226,24 @@ def test_a_stalled_upload_gets_408_and_a_started_stream_runs_on(
                 if time.monotonic() - started > 4:
                     break
         assert lines >= 2
+
+
+def test_a_request_with_no_answer_in_time_gets_503(
+    redis_process: RedisProcess, api_factory
+) -> None:
+    """The body has arrived, but Redis hangs (SIGSTOP): past the request timeout the client
+    gets 503 processing_timeout, not a hung connection; answers resume with Redis."""
+    settings = make_settings(redis_process.url, request_timeout_s=1.0, redis_timeout_s=10.0)
+    server: ApiServer = api_factory(settings)
+    assert redis_process.process is not None
+    with server.client() as http:
+        redis_process.process.send_signal(signal.SIGSTOP)
+        try:
+            started = time.monotonic()
+            reply = http.put("/v1/sites/s/fragments/f", content=ply_bytes(200))
+            assert time.monotonic() - started < 5
+        finally:
+            redis_process.process.send_signal(signal.SIGCONT)
+        _error(reply, 503, "processing_timeout")
+        assert reply.headers["retry-after"] == "1"
+        assert http.put("/v1/sites/s/fragments/f", content=ply_bytes(200)).status_code in (200, 202)
