@@ -130,8 +130,8 @@ class Consumer:
                 backoff = min(backoff * 2, 5.0)
             except redis.ResponseError as exc:
                 if storage_refused(exc):  # its job stays pending until there is room
-                    log.warning("%s: Redis storage full (%s); retrying in 5s", self.name, exc)
-                    self.stop.wait(5.0)
+                    log.warning("%s: Redis storage full (%s); retrying in 2s", self.name, exc)
+                    self.stop.wait(2.0)
                     continue
                 # NOGROUP / UNBLOCKED: the stream was deleted (e.g. Redis lost its data).
                 if not str(exc).startswith(("NOGROUP", "UNBLOCKED")):

@@ -61,7 +61,7 @@ def _prepare(settings: Settings, stop: threading.Event) -> None:
             if not storage_refused(exc):  # full: even an existing group's XGROUP is refused
                 raise
             log.warning("waiting for room in Redis at %s: %s", settings.redis_url, exc)
-            stop.wait(5.0)
+            stop.wait(2.0)
 
 
 def serve_jobs(settings: Settings, concurrency: int, stop: threading.Event) -> None:

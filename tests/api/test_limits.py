@@ -148,7 +148,7 @@ def test_workers_wait_for_room_instead_of_failing_jobs(
     """Storage full (this test's own Redis: maxmemory lowered under what it holds) while
     layout jobs are queued: the worker leaves them pending (no try burnt, nothing
     dead-lettered, no fragment failed) and runs them once there is room."""
-    settings = make_settings(redis_process.url, max_tries=2)
+    settings = make_settings(redis_process.url, max_tries=2, visibility_timeout_s=1.0)
     server: ApiServer = api_factory(settings)
     client = redis.Redis.from_url(redis_process.url, decode_responses=True)
     with server.client() as http:
@@ -158,7 +158,7 @@ def test_workers_wait_for_room_instead_of_failing_jobs(
         client.config_set("maxmemory-policy", "noeviction")
         client.config_set("maxmemory", "1")  # less than it holds: every write refused
         start_workers.start(settings, count=1)
-        time.sleep(6.5)  # > 2 x visibility timeout: each job would have been tried twice
+        time.sleep(3)  # > 2 x visibility timeout: each job would have been tried twice
         assert client.xlen("fpj:jobs:dead") == 0
         states = [f["state"] for f in http.get("/v1/sites/s").json()["fragments"]]
         assert states == ["queued"] * 3, states
@@ -174,7 +174,7 @@ def test_workers_wait_for_room_instead_of_failing_jobs(
             data = ply_bytes(2000, seed=10 + k)
             assert http.put(f"/v1/sites/t/fragments/f{k}", content=data).status_code == 202
         client.config_set("maxmemory", "1")
-        time.sleep(6.5)
+        time.sleep(3)
         client.config_set("maxmemory", "0")
         wait_until(lambda: all_done("t"), 40, 0.5)
         assert client.xlen("fpj:jobs:dead") == 0
