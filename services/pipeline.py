@@ -157,8 +157,6 @@ def _concrete(
         and refined.violation_after <= params.placement.closure_tolerance
     ):
         polygon = build_polygon(ordered, cand.rotations, refined.translations)
-        if not is_simple_rectilinear(polygon):
-            polygon = None  # chains that do not fit: a wall runs askew or crosses another
     return _Placed(assembly, cand, refined, poses, polygon)
 
 
@@ -289,16 +287,10 @@ def _choose(
             layouts, pieces, placement.best, placement.translations, params, placement.measured
         )
         return main, [], []
-    wanted = params.placement.max_alternatives + 1
-    concrete: list[_Placed] = []
-    # Assemblies whose chains do not make a room (no polygon) are passed over; a few more
-    # than are reported are looked at, so that those do not crowd out the ones that do.
-    for a in assemblies[: 3 * wanted]:
-        concrete.append(
-            _concrete(layouts, pieces, a.candidate, a.translations, params, placement.measured, a)
-        )
-        if sum(c.polygon is not None for c in concrete) >= wanted:
-            break
+    concrete = [
+        _concrete(layouts, pieces, a.candidate, a.translations, params, placement.measured, a)
+        for a in assemblies[: params.placement.max_alternatives + 1]
+    ]
     closing = [c for c in concrete if c.polygon is not None]
     if not closing:
         return concrete[0], [], assemblies
@@ -333,7 +325,9 @@ def _status(
     if main.polygon is None or main.assembly is None or n_usable < 2 or n_usable < n_all:
         return "open", 0.0
     confidence = main.assembly.probability
-    if confidence >= params.placement.closed_confidence:
+    # A floorplan with a wall askew or crossing another was joined from chains that miss
+    # a corner or do not fit: however likely the assembly, it is no room to act on unseen.
+    if confidence >= params.placement.closed_confidence and is_simple_rectilinear(main.polygon):
         return "closed", confidence
     # Unsure, with the runners-up to show; a lone assembly we doubt is no room to act on.
     return ("ambiguous" if alternatives else "open"), confidence
@@ -400,6 +394,8 @@ def place_site(
     diagnostics = _diagnostics(placement, main, assemblies, contradicted)
     if status == "open" and main.polygon is not None:
         diagnostics["unconfirmed_polygon"] = main.polygon.tolist()
+    if main.polygon is not None and not is_simple_rectilinear(main.polygon):
+        diagnostics["floorplan_not_rectilinear"] = True  # why it is not said closed
     report("done", 1.0)
     return ResultModel(
         status=status,

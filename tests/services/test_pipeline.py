@@ -11,9 +11,19 @@ import pytest
 from schemas.hints import FragmentPrior, HintsModel
 from schemas.params import PipelineParams, RegistrationParams
 from schemas.result import ResultModel, Status
+from services.confidence import Assembly
 from services.evaluation import evaluate_result, polygon_keypoint_error
 from services.geometry import signed_area
-from services.pipeline import align_clouds, align_fragments, estimate_layout, place_site
+from services.pipeline import (
+    _Placed,
+    _status,
+    align_clouds,
+    align_fragments,
+    estimate_layout,
+    place_site,
+)
+from services.placement import PlacementCandidate
+from services.refinement import Refinement
 from services.synthetic import ground_truth_json
 from services.types import LocalLayout, ManhattanFrame, ParsedFragment
 from tests.conftest import UNTUNED, chains_from_polygon, scene_layouts, small_scene
@@ -391,3 +401,20 @@ def test_fragment_confidence_is_at_least_the_rooms_when_closed_and_absent_when_o
     alone = place_site({fid: layouts[fid] for fid in list(layouts)[:1]})
     assert alone.status == "open"
     assert all(f.confidence is None for f in alone.fragments)
+
+
+@pytest.mark.parametrize(
+    ("polygon", "status"),
+    [
+        (np.array([[0, 0], [4, 0], [4, 3], [0, 3]], dtype=np.float64), "closed"),
+        # A corner chain missed: one wall askew across where the corner was.
+        (np.array([[0, 0], [4, 0], [4, 2], [3, 3], [0, 3]], dtype=np.float64), "ambiguous"),
+    ],
+)
+def test_a_sure_assembly_with_an_askew_wall_is_not_said_closed(polygon, status):
+    cand = PlacementCandidate(1.0, ("a", "b"), (0, 0), {})
+    sure = Assembly(cand, 1, 0.999, 0.999, np.zeros((2, 2)), polygon)
+    refined = Refinement(np.zeros((2, 2)), "solved", 0.0, 0.0)
+    main = _Placed(sure, cand, refined, {}, polygon)
+    runner_up = _Placed(sure, cand, refined, {}, polygon)
+    assert _status(main, [runner_up], 2, 2, PipelineParams()) == (status, 0.999)
