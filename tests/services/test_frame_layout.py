@@ -1,9 +1,7 @@
 """Local layout of RGB-D frames: levelled from the optical frame, chain ends from the
-frustum, poses that map the frame's own points; timing of a 640x480 frame."""
+frustum, poses that map the frame's own points; a full-size 640x480 frame."""
 
 from __future__ import annotations
-
-import time
 
 import numpy as np
 import pytest
@@ -42,17 +40,16 @@ def test_three_frames_close_the_room_with_poses_of_their_own_points() -> None:
     assert all(e.translation_pct < 5.0 for e in report.pose_errors.values())
 
 
-def test_a_kinect_frame_is_laid_out_fast() -> None:
+def test_a_kinect_frame_is_laid_out() -> None:
+    # Full 640x480 resolution (the other tests use smaller frames); its speed is measured
+    # by bench/rgbd_frames.py, not here: a timed test fails on a busy machine.
     scene = generate_frame_scene(FrameSpec(), 3)
     frame = scene.frames[0].frame
     assert frame.shape == (480, 640)
-    estimate_rgbd_layout(frame)  # warm up (imports, allocations)
-    seconds = []
-    for _ in range(3):
-        start = time.perf_counter()
-        estimate_rgbd_layout(frame)
-        seconds.append(time.perf_counter() - start)
-    assert min(seconds) < 0.2  # bench/rgbd_frames.py measures the target of 0.1 s
+    layout = estimate_rgbd_layout(frame)
+    up = layout.frame.rotation[2]
+    truth_up = scene.frames[0].pose[:3, :3].T @ np.array([0.0, 0.0, 1.0])
+    assert np.degrees(np.arccos(np.clip(up @ truth_up, -1, 1))) < 2.0
 
 
 def test_frustum_band_and_field_of_view() -> None:
