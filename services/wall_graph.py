@@ -210,9 +210,10 @@ def _best_path(
     (see :meth:`WallLine.crossing_gap`). The paper instead takes the two ends of the
     longest path in a spanning forest of the keypoints (``source_target="spanning_forest"``).
 
-    The search is label-correcting over (node, arrival axis) states, one best simple path
-    per state: a fragment may see closed loops of walls (a recess seen whole), so the
-    path's own nodes are excluded from its extensions.
+    The search is label-correcting over states, one best simple path per state: a state
+    is a node and the axis the path arrived along, numbered ``2 * node + axis`` (axis 0: x,
+    1: y). A fragment may see closed loops of walls (a recess seen whole), so the path's
+    own nodes are excluded from its extensions.
 
     cover: (n, n) high-evidence wall length of each edge, m; points: (n, 2) node
     coordinates.
@@ -221,36 +222,38 @@ def _best_path(
     coo = we.tocoo()
     if n < 2 or coo.nnz == 0:
         return None
-    u, v = coo.row.astype(np.int64), coo.col.astype(np.int64)
+    u, v = coo.row.astype(np.int64), coo.col.astype(np.int64)  # each edge's tail and head
     step = np.abs(points[v] - points[u])
     axis = (step[:, 1] > step[:, 0]).astype(np.int64)
     gain = cover[u, v] - _COST_METERS * coo.data
-    target = 2 * v + axis
-    value = np.full(2 * n, -np.inf)
-    on_path = np.zeros((2 * n, n), dtype=bool)
+    head_state = 2 * v + axis  # the state an edge leads into
+    value = np.full(2 * n, -np.inf)  # per state: score of its best path so far
+    on_path = np.zeros((2 * n, n), dtype=bool)  # per state: the nodes of that path
     paths: list[list[int]] = [[] for _ in range(2 * n)]
     edges = np.arange(len(u))
+    start_here = 0  # option column 0: the path starts at the edge's tail
     for _ in range(2 * n + 1):
-        # Each edge: start the path at its tail, or extend the path arriving there along
-        # either axis (a turn costs a corner) unless that path already holds the head.
+        # Each edge: start the path at its tail (column 0), or extend the path arriving
+        # there along x (column 1) or y (column 2), a turn costing a corner, unless that
+        # path already holds the head.
         options = np.zeros((len(u), 3))
         for arrival in (0, 1):
-            tail = 2 * u + arrival
-            extend = value[tail] - _CORNER_METERS * (axis != arrival)
-            options[:, arrival + 1] = np.where(on_path[tail, v], -np.inf, extend)
+            tail_state = 2 * u + arrival
+            extend = value[tail_state] - _CORNER_METERS * (axis != arrival)
+            options[:, arrival + 1] = np.where(on_path[tail_state, v], -np.inf, extend)
         choice = np.argmax(options, axis=1)
         candidate = options[edges, choice] + gain
         order = np.argsort(candidate)  # ascending: the best candidate per state lands last
         best = np.full(2 * n, -np.inf)
-        best[target[order]] = candidate[order]
+        best[head_state[order]] = candidate[order]
         edge_of = np.full(2 * n, -1)
-        edge_of[target[order]] = order
+        edge_of[head_state[order]] = order
         changed = np.flatnonzero(best > value + 1e-9)
         if len(changed) == 0:
             break
         # Paths of the previous round: an update must not read a path changed in this one.
         prefixes = [
-            paths[2 * int(u[e]) + choice[e] - 1] if choice[e] else [int(u[e])]
+            paths[2 * int(u[e]) + choice[e] - 1] if choice[e] != start_here else [int(u[e])]
             for e in edge_of[changed]
         ]
         for updated, prefix in zip(changed, prefixes, strict=True):

@@ -180,7 +180,7 @@ class _Search:
             self.truncated = True
         return self.truncated
 
-    def bound(self) -> float:
+    def threshold(self) -> float:
         """Energy a new leaf must beat: that of the k-th best kept, and at most the best's
         plus the energy window (an assembly that much less likely is worth nothing)."""
         window = self.lowest + self.params.energy_window
@@ -463,7 +463,7 @@ def _close(search: _Search, state: _State) -> None:
     penalty = _UNPLACED_PENALTY * missing + search.params.hint_pair_cost * len(violated)
     weights = search.weights
     # The hull has at least 4 edges: skip computing it when even that cannot win.
-    if weights @ features + weights[_F["hull"]] * 4 + penalty >= search.bound():
+    if weights @ features + weights[_F["hull"]] * 4 + penalty >= search.threshold():
         return
     features[_F["hull"]] = hull_edges(state.vertices)
     energy = float(weights @ features) + penalty
@@ -474,8 +474,12 @@ def _close(search: _Search, state: _State) -> None:
 
 
 def _dfs(search: _Search, state: _State, remaining: tuple[int, ...]) -> None:
-    """Expand ``state``: children in order of their lower bound, cut at the bound. Only a
-    child that is visited pays for its geometry (crossing and free-space tests)."""
+    """Expand ``state``: children in order of their lower bound (the least energy any leaf
+    below them can have, :func:`_bounds`), cut where that reaches the search's threshold
+    (the energy a new leaf must beat, :meth:`_Search.threshold`). Only a child that is
+    visited pays for its geometry (crossing and free-space tests). A state is a partial
+    loop: the pieces placed in order with their quarter turns and where its end lies;
+    ``remaining`` holds the indices of the pieces still to place."""
     search.nodes += 1
     if not remaining or not search.require_closed:
         # An open search also keeps partial chains: the best one is placed when no
@@ -488,8 +492,8 @@ def _dfs(search: _Search, state: _State, remaining: tuple[int, ...]) -> None:
         return
     ranked = sorted(zip(_bounds(search, state, remaining, options), options, strict=True))
     expanded = 0
-    for bound, (j, turn) in ranked:
-        if bound >= search.bound() or search.out_of_budget():
+    for lower_bound, (j, turn) in ranked:
+        if lower_bound >= search.threshold() or search.out_of_budget():
             return
         child = _extend(search, state, j, turn)
         if child is not None:
@@ -519,7 +523,7 @@ def _beam(search: _Search, root: _State, width: int) -> None:
         parents, layer = layer, []
         seen: set[tuple[object, ...]] = set()
         for bound, k, j, turn in scored:
-            if len(layer) >= width or bound >= search.bound() or search.out_of_budget():
+            if len(layer) >= width or bound >= search.threshold() or search.out_of_budget():
                 break
             search.nodes += 1
             child = _extend(search, parents[k], j, turn)
