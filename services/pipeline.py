@@ -8,6 +8,7 @@ CLI), merging overlapping ones first, and returns the layouts with the result.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -94,13 +95,18 @@ def _room_height(layouts: Sequence[LocalLayout]) -> float | None:
 
 @dataclass(frozen=True)
 class _Placed:
-    """One assembly made concrete: refined translations, poses, floorplan (site frame)."""
+    """One assembly made concrete: refined translations, poses, floorplan (site frame).
+
+    rectilinear: the floorplan is a simple rectilinear polygon in the search's frame (the
+    hints' frame may turn it by any angle, so it is checked before).
+    """
 
     assembly: Assembly | None
     candidate: PlacementCandidate
     refinement: Refinement
     poses: dict[str, FloatArray]
     polygon: FloatArray | None
+    rectilinear: bool = True
 
 
 def _site_hints(
@@ -157,7 +163,8 @@ def _concrete(
         and refined.violation_after <= params.placement.closure_tolerance
     ):
         polygon = build_polygon(ordered, cand.rotations, refined.translations)
-    return _Placed(assembly, cand, refined, poses, polygon)
+    rectilinear = polygon is not None and is_simple_rectilinear(polygon)
+    return _Placed(assembly, cand, refined, poses, polygon, rectilinear)
 
 
 def _gap(ordered: Sequence[Piece], cand: PlacementCandidate, translations: FloatArray) -> float:
@@ -191,7 +198,7 @@ def _to_hints_frame(
     polygon = None
     if placed.polygon is not None:
         polygon = placed.polygon @ transform[:2, :2].T + transform[:2, 3]
-    return _Placed(placed.assembly, placed.candidate, placed.refinement, poses, polygon)
+    return dataclasses.replace(placed, poses=poses, polygon=polygon)
 
 
 def _contradicted_hints(
@@ -327,7 +334,7 @@ def _status(
     confidence = main.assembly.probability
     # A floorplan with a wall askew or crossing another was joined from chains that miss
     # a corner or do not fit: however likely the assembly, it is no room to act on unseen.
-    if confidence >= params.placement.closed_confidence and is_simple_rectilinear(main.polygon):
+    if confidence >= params.placement.closed_confidence and main.rectilinear:
         return "closed", confidence
     # Unsure, with the runners-up to show; a lone assembly we doubt is no room to act on.
     return ("ambiguous" if alternatives else "open"), confidence
@@ -394,7 +401,7 @@ def place_site(
     diagnostics = _diagnostics(placement, main, assemblies, contradicted)
     if status == "open" and main.polygon is not None:
         diagnostics["unconfirmed_polygon"] = main.polygon.tolist()
-    if main.polygon is not None and not is_simple_rectilinear(main.polygon):
+    if main.polygon is not None and not main.rectilinear:
         diagnostics["floorplan_not_rectilinear"] = True  # why it is not said closed
     report("done", 1.0)
     return ResultModel(

@@ -13,7 +13,7 @@ from schemas.params import PipelineParams, RegistrationParams
 from schemas.result import ResultModel, Status
 from services.confidence import Assembly
 from services.evaluation import evaluate_result, polygon_keypoint_error
-from services.geometry import signed_area
+from services.geometry import is_simple_rectilinear, signed_area
 from services.pipeline import (
     _Placed,
     _status,
@@ -331,6 +331,27 @@ def test_with_prior_poses_the_result_is_in_the_hints_frame():
     assert result.diagnostics["hints_contradicted"] == []
 
 
+def test_a_room_in_a_hints_frame_turned_by_any_angle_is_closed():
+    # The hints' frame need not share the room's axes: a floorplan turned by 30 degrees
+    # into it is still the rectilinear room it was in the search's frame.
+    scene = small_scene("easy", 0)
+    turn = np.eye(4)
+    c, s = math.cos(math.radians(30.0)), math.sin(math.radians(30.0))
+    turn[:2, :2] = [[c, -s], [s, c]]
+    hints = HintsModel(
+        fragments={
+            fid: prior.model_copy(update={"pose": (turn @ np.array(prior.pose)).tolist()})
+            for fid, prior in _true_priors(scene).fragments.items()
+        }
+    )
+    result = place_site(scene_layouts(), hints=hints)
+    assert result.status == "closed"
+    assert "floorplan_not_rectilinear" not in result.diagnostics
+    polygon = np.array(result.floorplan.rooms[0].polygon)
+    turned = scene.polygon @ turn[:2, :2].T
+    assert polygon_keypoint_error(polygon, turned) < 0.3
+
+
 def test_a_contradicted_prior_is_reported():
     scene = small_scene("easy", 0)
     moved = scene.fragments[1].id
@@ -415,6 +436,6 @@ def test_a_sure_assembly_with_an_askew_wall_is_not_said_closed(polygon, status):
     cand = PlacementCandidate(1.0, ("a", "b"), (0, 0), {})
     sure = Assembly(cand, 1, 0.999, 0.999, np.zeros((2, 2)), polygon)
     refined = Refinement(np.zeros((2, 2)), "solved", 0.0, 0.0)
-    main = _Placed(sure, cand, refined, {}, polygon)
+    main = _Placed(sure, cand, refined, {}, polygon, is_simple_rectilinear(polygon))
     runner_up = _Placed(sure, cand, refined, {}, polygon)
     assert _status(main, [runner_up], 2, 2, PipelineParams()) == (status, 0.999)
