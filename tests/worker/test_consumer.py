@@ -190,6 +190,12 @@ def test_running_job_is_kept_from_others_by_the_keeper(client: Any) -> None:
     threading.Thread(target=keeper.run, daemon=True).start()
     runner = threading.Thread(target=owner.step)
     runner.start()
+    # The owner must hold the job before the other consumer looks, or the other one may
+    # simply read the new job first (a race of the test, not of the keeper).
+    taken_by = time.monotonic() + 1.0
+    while not leases.snapshot() and time.monotonic() < taken_by:
+        time.sleep(0.005)
+    assert leases.snapshot(), "the owner never took the job"
     other_handler = Recorder()
     other = Consumer(
         "other", client, client, settings, LeaseBook(), stop, handlers={"layout": other_handler}
