@@ -110,6 +110,12 @@ def robust_cost(squared: float) -> float:
     return _ROBUST_SCALE * math.log1p(0.5 * squared / _ROBUST_SCALE)
 
 
+def _cauchy_weights(misfit: FloatArray) -> FloatArray:
+    """Weights of the reweighted least squares whose loss is :func:`robust_cost`."""
+    weights: FloatArray = 1.0 / (1.0 + 0.5 * misfit / _ROBUST_SCALE)
+    return weights
+
+
 def fit_frame(
     priors: Mapping[str, PiecePrior],
     rotations: Mapping[str, int],
@@ -137,7 +143,7 @@ def fit_frame(
         shift = (w[:, None] * residual).sum(axis=0) / w.sum()
         misfit = np.sum((residual - shift) ** 2, axis=1) * xy_precision
         misfit += np.array([wrap_angle(o - yaw) ** 2 for o in offsets]) * yaw_precision
-        weights = 1.0 / (1.0 + 0.5 * misfit / _ROBUST_SCALE)  # Cauchy weights
+        weights = _cauchy_weights(misfit)
         if step == _REWEIGHTS - 1:
             # Last pass: the priors the assembly contradicts get no say at all.
             inliers = misfit < _OUTLIER_MISFIT
@@ -214,7 +220,7 @@ def position_costs(anchors: Sequence[tuple[float, float, float, float, float]]) 
         cw = c * w
         shift = np.einsum("qk,qkd->qd", cw, d) / cw.sum(axis=1, keepdims=True)
         misfit = w * np.sum((d - shift[:, None, :]) ** 2, axis=2)
-        c = 1.0 / (1.0 + 0.5 * misfit / _ROBUST_SCALE)
+        c = _cauchy_weights(misfit)
     costs: FloatArray = (_ROBUST_SCALE * np.log1p(0.5 * misfit / _ROBUST_SCALE)).sum(axis=1)
     return costs
 

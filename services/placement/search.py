@@ -404,6 +404,7 @@ def _extend(search: _Search, state: _State, j: int, turn: int) -> _State | None:
     samples = local_samples + state.end
     heading_out = (piece.directions[0] + rotation) % 4
     mean, var = search.displacement[state.heading][heading_out]
+    drift_mean, drift_var = state.mean + mean, state.var + var  # hidden displacement so far
     prev = state.order[-1]
     features = state.features.copy()
     features[_F["turns"]] += turn != 0
@@ -412,7 +413,7 @@ def _extend(search: _Search, state: _State, j: int, turn: int) -> _State | None:
     box = _box(samples)
     features[_F["conflict"]] += _conflict(search, state, j, rotation, samples, box)
     rotations_cost = state.rotation_prior + search.turned_rotation_cost[j, rotation]
-    anchor = _anchor(search, j, state.end, state.mean + mean, state.var + var)
+    anchor = _anchor(search, j, state.end, drift_mean, drift_var)
     anchors = state.anchors if anchor is None else (*state.anchors, anchor)
     if search.frame is not None:
         features[_F["prior"]] = float((rotations_cost + position_costs(anchors)).min())
@@ -424,8 +425,8 @@ def _extend(search: _Search, state: _State, j: int, turn: int) -> _State | None:
         heading=(piece.directions[-1] + rotation) % 4,
         turning=state.turning + turn + piece.turning,
         features=features,
-        mean=state.mean + mean,
-        var=state.var + var,
+        mean=drift_mean,
+        var=drift_var,
         walls=np.concatenate([state.walls, walls]),
         vertices=np.concatenate([state.vertices, pts]),
         samples=np.concatenate([state.samples, samples]),
