@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
-from typing import cast
+from typing import Any, cast
 
 import redis
 import redis.asyncio as aioredis
@@ -66,26 +66,22 @@ def sync_client(url: str, *, timeout: float, decode: bool = True) -> redis.Redis
 
     ``timeout`` bounds connecting and every reply; blocking reads must stay below it.
     """
-    return redis.Redis.from_url(
-        url,
-        decode_responses=decode,
-        socket_timeout=timeout,
-        socket_connect_timeout=min(timeout, 5.0),
-        health_check_interval=30,
-        retry=Retry(ExponentialBackoff(cap=0.5, base=0.05), retries=1),
-    )
+    return redis.Redis.from_url(url, decode_responses=decode, **_pool_options(timeout))
 
 
 def async_client(url: str, *, timeout: float) -> aioredis.Redis:
     """A pooled asyncio client for the API (string replies)."""
-    return aioredis.Redis.from_url(
-        url,
-        decode_responses=True,
-        socket_timeout=timeout,
-        socket_connect_timeout=min(timeout, 5.0),
-        health_check_interval=30,
-        retry=Retry(ExponentialBackoff(cap=0.5, base=0.05), retries=1),
-    )
+    return aioredis.Redis.from_url(url, decode_responses=True, **_pool_options(timeout))
+
+
+def _pool_options(timeout: float) -> dict[str, Any]:
+    """Timeouts, health checks and the one quick retry both clients share."""
+    return {
+        "socket_timeout": timeout,
+        "socket_connect_timeout": min(timeout, 5.0),
+        "health_check_interval": 30,
+        "retry": Retry(ExponentialBackoff(cap=0.5, base=0.05), retries=1),
+    }
 
 
 def _busy_group(exc: redis.exceptions.ResponseError) -> bool:
