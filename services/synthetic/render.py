@@ -10,6 +10,15 @@ frame looking around. Frames are chosen so that, in loop order, each one's stret
 boundary starts where the previous one's ended, give or take a few decimeters: little or no
 overlap, as in the paper's sparse frames.
 
+A frame's stretch, its true wall chain, is what its camera can see of the loop, found by
+casting floor-plan rays across its field of view: the wall parts its rays reach first (not
+those behind a protruding corner), at 10 degrees or more from the wall's surface (a wall seen
+edge-on gives too few points to be located), in runs of 0.3 m or more along one wall (not a
+sliver past a corner), from the first such part to the last. Hidden parts between two seen
+ones stay in the chain only when what is seen tells where they run (the same wall, the next
+one, or one wall further when a seen part reaches its corner); a view whose seen walls make
+two chains is not used.
+
 World frame: z up, floor at z = 0, meters. A frame's local frame is its optical frame (x
 right, y down, z forward). Pure: returns arrays, writes no file.
 """
@@ -60,6 +69,7 @@ KINECT = IntrinsicsModel(width=640, height=480, fx=525.0, fy=525.0, cx=319.5, cy
 """A Kinect-like depth camera (TUM RGB-D's default intrinsics)."""
 
 _WALL, _FLOOR, _CEILING, _OUTSIDE, _FURNITURE = range(5)
+_RAY_STEP = math.radians(0.25)  # floor-plan rays of a view: a few cm apart at 7 m
 _BOX_FACES = np.array(
     [
         [0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4],
@@ -81,6 +91,9 @@ class FrameSpec:
     max_range: readings farther than this are lost, m (the stations keep every wall of a
     frame within it). min_distance: least distance from a station to any wall, and from the
     camera to the walls it views, m. noise: Kinect-like depth noise and dropouts.
+    min_incidence_deg, min_visible: what a frame sees of a wall (its true chain): parts
+    reached first by its rays, at this angle or more from the surface, in runs of at least
+    this length, m (:func:`_visible_stretch`).
     """
 
     n_corners_range: tuple[int, int] = (4, 8)
@@ -97,6 +110,8 @@ class FrameSpec:
     min_distance: float = 1.2
     noise: bool = True
     dropout: float = 0.01
+    min_incidence_deg: float = 10.0
+    min_visible: float = 0.3
     furniture: bool = True
     clutter: float = 1.0
     openings: bool = True
@@ -322,8 +337,11 @@ def _camera_pose(position: FloatArray, yaw: float, pitch: float, roll: float) ->
     return pose
 
 
-def _ray_hits(room: Room, origin: FloatArray, angles: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """First hit of 2D rays with the room boundary: (distance (R,), arc position (R,))."""
+def _ray_hits(
+    room: Room, origin: FloatArray, angles: FloatArray
+) -> tuple[FloatArray, FloatArray, NDArray[np.intp]]:
+    """First hit of 2D rays with the room boundary: distance (R,), arc position (R,) and the
+    edge hit (R,)."""
     direction = np.column_stack([np.cos(angles), np.sin(angles)])
     a, d = room.polygon, room.dirs * room.lengths[:, None]  # edges a + s d, s in [0, 1]
     w = a - origin  # (E, 2)
@@ -337,35 +355,93 @@ def _ray_hits(room: Room, origin: FloatArray, angles: FloatArray) -> tuple[Float
     rows = np.arange(len(angles))
     distance = t[rows, edge]
     arc = room.arcs[edge] + s[rows, edge] * room.lengths[edge]
-    return distance, np.mod(arc, room.perimeter)
+    return distance, np.mod(arc, room.perimeter), edge
+
+
+def _visible_stretch(
+    room: Room, edge: NDArray[np.intp], arc: FloatArray, angles: FloatArray, spec: FrameSpec
+) -> tuple[float, float] | None:
+    """(start, length) of the loop a camera sees, from its rays' first hits (right to left
+    across the field of view); None when it sees no wall well enough, or walls that do not
+    make one chain.
+
+    A wall part counts when a ray reaches it first (parts hidden behind a protruding corner
+    do not) at ``min_incidence_deg`` or more from its surface, and the run of such rays on
+    that wall spans ``min_visible`` or more: a wall seen edge-on, or a sliver of it, gives too
+    few points to be located. The stretch runs from the first such part to the last. Hidden
+    parts between two seen ones stay in it when the walls there follow from what is seen: the
+    same wall, or the next one (the corner is where their lines meet), or one wall further
+    on when a seen part reaches the hidden wall's corner (a protruding corner's far side). A
+    view with a gap of any other kind sees two chains, not one (None).
+    """
+    across = np.abs(np.cos(angles) * room.normals[edge, 0] + np.sin(angles) * room.normals[edge, 1])
+    key = np.where(across >= math.sin(math.radians(spec.min_incidence_deg)), edge, -1)
+    cuts = np.flatnonzero(np.diff(key)) + 1
+    first, last = np.append(0, cuts), np.append(cuts, len(key)) - 1  # runs of one key
+    span = np.mod(arc[last] - arc[first], room.perimeter)
+    kept = (key[first] >= 0) & (span >= spec.min_visible) & (span < 0.5 * room.perimeter)
+    first, last = first[kept], last[kept]
+    if not len(first):
+        return None
+    n = room.n_edges
+    wall = edge[first]
+    # A neighbouring ray on the adjacent wall: the run reaches the corner between them.
+    before = np.append(-1, edge)[first] == (wall - 1) % n
+    after = np.append(edge, -1)[last + 1] == (wall + 1) % n
+    start = np.where(before, room.arcs[wall], arc[first])
+    end = np.mod(np.where(after, room.arcs[wall + 1], arc[last]), room.perimeter)
+    reaches_end = _on_vertex(room, end, wall + 1)[:-1] | _on_vertex(room, start, wall)[1:]
+    step = np.mod(np.diff(wall), n)
+    if np.any((step > 2) | ((step == 2) & ~reaches_end)):
+        return None
+    return float(start[0]), float(np.mod(end[-1] - start[0], room.perimeter))
+
+
+def _on_vertex(room: Room, arc: FloatArray, vertex: NDArray[np.intp]) -> NDArray[np.bool_]:
+    """(M,) whether loop positions lie within 0.1 m of the given vertices (a ray step)."""
+    gap = np.mod(arc - room.arcs[vertex % room.n_edges] + 0.5 * room.perimeter, room.perimeter)
+    return np.abs(gap - 0.5 * room.perimeter) < 0.1
 
 
 @dataclass(frozen=True)
 class _View:
     station: int
     yaw: float
-    start: float  # arc of the right image edge's hit
-    length: float  # CCW arc to the left image edge's hit
+    start: float  # arc of the right end of the stretch the camera sees
+    length: float  # CCW arc to its left end
+
+
+def _view_offsets(k: IntrinsicsModel) -> FloatArray:
+    """Bearings (radians, right to left, from the heading) of a view's floor-plan rays: the
+    image's side edges and every ``_RAY_STEP`` between."""
+    half = math.atan2(max(k.cx, k.width - 1 - k.cx), k.fx)
+    return np.linspace(-half, half, 1 + int(np.ceil(2.0 * half / _RAY_STEP)))
+
+
+def _view_stretch(
+    room: Room, station: FloatArray, yaw: float, spec: FrameSpec
+) -> tuple[float, float] | None:
+    """(start, length) of the loop a camera at ``station`` (2,) heading ``yaw`` sees, or None
+    when a wall in view lies out of range or too close, or it sees no one chain
+    (:func:`_visible_stretch`) of a usable length."""
+    angles = yaw + _view_offsets(spec.intrinsics)
+    distance, arc, edge = _ray_hits(room, station, angles)
+    if np.max(distance) > spec.max_range - 0.5 or np.min(distance) < spec.min_distance:
+        return None
+    seen = _visible_stretch(room, edge, arc, angles, spec)
+    if seen is None or not 0.8 <= seen[1] <= 0.5 * room.perimeter:
+        return None
+    return seen
 
 
 def _views(room: Room, stations: FloatArray, spec: FrameSpec) -> list[_View]:
-    """Headings every 3 degrees from every station whose whole view lies within range."""
-    k = spec.intrinsics
-    half = math.atan2(max(k.cx, k.width - 1 - k.cx), k.fx)
+    """Headings every 3 degrees from every station that see a stretch (:func:`_view_stretch`)."""
     views = []
     for index, station in enumerate(stations):
-        yaws = np.radians(np.arange(0.0, 360.0, 3.0))
-        for yaw in yaws:
-            angles = yaw + np.linspace(-half, half, 25)
-            distance, arc = _ray_hits(room, station, angles)
-            if np.max(distance) > spec.max_range - 0.5 or np.min(distance) < spec.min_distance:
-                continue
-            start, end = arc[0], arc[-1]
-            length = float(np.mod(end - start, room.perimeter))
-            inside = np.mod(arc - start, room.perimeter) <= length + 1e-6
-            if length < 0.8 or length > 0.5 * room.perimeter or not inside.all():
-                continue
-            views.append(_View(index, float(yaw), float(start), length))
+        for yaw in np.radians(np.arange(0.0, 360.0, 3.0)):
+            seen = _view_stretch(room, station, float(yaw), spec)
+            if seen is not None:
+                views.append(_View(index, float(yaw), *seen))
     return views
 
 
