@@ -38,6 +38,8 @@ _SUPPORT_POINTS = 3  # interior-strip points that show the line's cell borders s
 _TOP_REACH = 0.85  # share of the floor-to-ceiling band a wall column must reach
 _MIN_VISIBLE = 0.5  # m, least height of a column a camera must see to judge it
 _AXIS_COS = float(np.cos(np.radians(25.0)))  # a normal within 25 deg of an axis faces along it
+_MAX_DOORWAY = 2.0  # m, widest gap in a wall read as a door (as services.wall_graph's edges)
+_RECESS_DEPTH = 0.3  # m, a wall reaching this far behind a gap's edge: a recess, not a door
 
 
 @dataclass(frozen=True)
@@ -422,26 +424,26 @@ def _facing_cameras(
     """What an RGB-D frame's walls must satisfy: the camera stands on their interior side,
     and no nearer wall stands between it and them (a wall seen through a door or window of
     a nearer one is the next room's). Cells seen through a nearer line's wall points (at any
-    height: a window leaves wall below and above it) lose their evidence."""
+    height: a window leaves wall below and above it) or through a door in it
+    (:func:`_doors_closed`) lose their evidence."""
     centre = np.mean([view.centre[:2] for view in views], axis=0)
-    facing = [
-        line for line in lines if (centre[1 - line.axis] - line.offset) * _interior_sign(line) > 0
-    ]
+    facing = _turned_to_camera(lines, centre)
     kept = []
     for far in facing:
         c_off, c_run = centre[1 - far.axis], centre[far.axis]
         high = far.high.copy()
         run = far.origin + (np.arange(len(high)) + 0.5) * far.cell_size
-        for near in facing:
+        for near in lines:  # any wall points occlude, whichever side they face
             if near.axis != far.axis or near.occupied is None:
                 continue
             ratio = (near.offset - c_off) / (far.offset - c_off)
             if not 0.0 < ratio < 1.0 - _NEAR_STRIP:
                 continue
+            occupied = _doors_closed(near, lines, np.sign(far.offset - near.offset))
             cell = np.rint((c_run + (run - c_run) * ratio - near.origin) / near.cell_size)
-            inside = (cell >= 1) & (cell < len(near.occupied) - 1)
+            inside = (cell >= 1) & (cell < len(occupied) - 1)
             index = cell[inside].astype(np.int64)
-            through = near.occupied[index] | near.occupied[index - 1] | near.occupied[index + 1]
+            through = occupied[index] | occupied[index - 1] | occupied[index + 1]
             high[np.flatnonzero(inside)[through]] = False
         spans = _runs(high, _MAX_GAP_CELLS, params.min_wall_cells)
         if spans:
@@ -450,3 +452,60 @@ def _facing_cameras(
             )
             kept.append(dataclasses.replace(far, high=high, segments=segments))
     return kept
+
+
+def _turned_to_camera(lines: Sequence[WallLine], centre: FloatArray) -> list[WallLine]:
+    """The lines with the camera (``centre`` (2,), aligned frame) on their interior side.
+
+    The camera stands inside the room, so every wall it sees faces it. A line whose boundary
+    test put its interior on the far side is turned round, unless a line facing the camera
+    lies there already: near the camera the floor in front of a wall is below the view, while
+    floor beyond it shows through a door, and the wall was read as facing away.
+    """
+    toward = [(centre[1 - line.axis] - line.offset) * _interior_sign(line) > 0 for line in lines]
+    facing = [line for line, ok in zip(lines, toward, strict=True) if ok]
+    axes = np.array([line.axis for line in facing])
+    offsets = np.array([line.offset for line in facing])
+
+    def free(line: WallLine) -> bool:
+        return not np.any((axes == line.axis) & (np.abs(offsets - line.offset) < _MERGE_DISTANCE))
+
+    return facing + [
+        dataclasses.replace(line, travel=-line.travel)
+        for line, ok in zip(lines, toward, strict=True)
+        if not ok and free(line)
+    ]
+
+
+def _doors_closed(near: WallLine, lines: Sequence[WallLine], away: float) -> NDArray[np.bool_]:
+    """A line's occupied cells with its doorways filled in: gaps of at most ``_MAX_DOORWAY``
+    between wall points of the line, unless a wall of the other axis leaves it at the gap's
+    edge, going away from the camera (``away``, the sign of the far side's offsets): that gap
+    opens onto a recess of the room, not onto the next room. A frame often sees a door's
+    sides but not the wall over it (the top of its view is lower), and through it a wall of
+    the next room with more evidence than the nearer wall's pieces.
+    """
+    assert near.occupied is not None
+    occupied = near.occupied.copy()
+    held = np.flatnonzero(occupied)
+    width = np.diff(held) - 1
+    doors = np.flatnonzero((width > 0) & (width * near.cell_size <= _MAX_DOORWAY))
+    behind = near.offset + away * _RECESS_DEPTH
+    sides = np.array(
+        [
+            other.offset
+            for other in lines
+            if not other.virtual
+            and other.axis != near.axis
+            and np.any((other.segments[:, 0] <= behind) & (other.segments[:, 1] >= behind))
+        ]
+    )
+    reach = 2 * near.cell_size
+    for k in doors:
+        lo, hi = (
+            near.origin + (held[k] + 1) * near.cell_size,
+            near.origin + held[k + 1] * near.cell_size,
+        )
+        if not np.any((sides >= lo - reach) & (sides <= hi + reach)):
+            occupied[held[k] + 1 : held[k + 1]] = True
+    return occupied

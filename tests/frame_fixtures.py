@@ -1,16 +1,30 @@
 """Shared RGB-D frame scenes for the tests: an empty rectangular room seen by a wide-angle
 camera from one station in three frames (each frame's layout is reliable, and three close
-the loop), and helpers to zip a frame as an upload."""
+the loop), Kinect views of a given room, and helpers to zip a frame as an upload."""
 
 from __future__ import annotations
 
 import io
+import math
 import zipfile
 from functools import cache
 
+import numpy as np
+import open3d as o3d
+
 from schemas.frames import IntrinsicsModel
 from services.rgbd import RgbdFrame, encode_frame_files
-from services.synthetic.render import FrameScene, FrameSpec, generate_frame_scene
+from services.synthetic.furniture import Furnishing
+from services.synthetic.render import (
+    KINECT,
+    FrameScene,
+    FrameSpec,
+    _camera_pose,
+    generate_frame_scene,
+    render_frame,
+    scene_mesh,
+)
+from services.synthetic.room import Room
 
 WIDE = IntrinsicsModel(width=640, height=480, fx=190.0, fy=190.0, cx=319.5, cy=239.5)
 THREE_FRAMES = FrameSpec(
@@ -29,6 +43,24 @@ CLOSING_SEEDS = (0, 4, 5)  # seeds of THREE_FRAMES whose three frames close the 
 def three_frames(seed: int = 0) -> FrameScene:
     """A room and its three wide-angle frames (cached: rendering takes a second)."""
     return generate_frame_scene(THREE_FRAMES, seed)
+
+
+def render_views(
+    room: Room,
+    furnishing: Furnishing,
+    stances: dict[str, tuple[tuple[float, float, float], float, float]],
+) -> dict[str, tuple[RgbdFrame, np.ndarray]]:
+    """Noise-free Kinect frames of a room: name -> (frame, its (4, 4) optical -> world pose)
+    for each stance name -> (camera position (x, y, z), yaw and pitch in degrees)."""
+    vertices, triangles, material = scene_mesh(room, furnishing)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor.from_numpy(vertices), o3d.core.Tensor.from_numpy(triangles))
+    out = {}
+    for name, (position, yaw, pitch) in stances.items():
+        pose = _camera_pose(np.array(position), math.radians(yaw), math.radians(pitch), 0.0)
+        render = render_frame(scene, material, pose, KINECT, 7.0)
+        out[name] = (RgbdFrame(render.depth, KINECT, render.color), pose)
+    return out
 
 
 def frame_files(frame: RgbdFrame, color_format: str = "png") -> dict[str, bytes]:

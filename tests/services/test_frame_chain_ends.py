@@ -110,6 +110,10 @@ def test_chain_ends_move_out_to_the_frustum_edges_unless_a_wall_turns() -> None:
     corner = WallLine(**{**corner.__dict__, "segments": np.array([[2.0, 3.0]])})
     kept = _to_frustum_edges(chain, [_line(3.0, -1), corner], [view])
     np.testing.assert_allclose(kept[1], chain[1])
+    # A door's reveal there (the wall's thickness, behind it) is no turn of the wall.
+    reveal = WallLine(**{**corner.__dict__, "segments": np.array([[3.0, 3.15]])})
+    moved = _to_frustum_edges(chain, [_line(3.0, -1), reveal], [view])
+    np.testing.assert_allclose(moved[1], 3.0 / left[1] * left, atol=1e-9)
 
 
 def test_the_floor_plan_wedge_of_a_pitched_camera_is_wider_than_its_eye_level_cut() -> None:

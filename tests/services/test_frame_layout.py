@@ -10,8 +10,10 @@ from services.evaluation import evaluate_result, keypoint_error
 from services.frame_layout import estimate_rgbd_layout, frame_points
 from services.frustum import CameraView, in_any_view, visible_band
 from services.pipeline import place_site
+from services.synthetic.furniture import Furnishing, Opening
 from services.synthetic.render import FrameSpec, frame_ground_truth_json, generate_frame_scene
-from tests.frame_fixtures import WIDE, three_frames
+from services.synthetic.room import Room
+from tests.frame_fixtures import WIDE, render_views, three_frames
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -68,3 +70,23 @@ def test_frame_points_keep_a_wide_angle_image_whole() -> None:
     frame = three_frames(0).frames[0].frame
     points = frame_points(frame)
     assert len(points) > 0.5 * frame.depth.size  # stride 1 at f = 190 px
+
+
+@pytest.mark.parametrize(
+    ("door", "pitch", "distance"), [(1.9, -8.0, 1.3), (1.7, -5.0, 1.3), (1.9, -12.0, 1.4)]
+)
+def test_the_wall_of_the_next_room_seen_through_a_door_is_not_the_frames_wall(
+    door: float, pitch: float, distance: float
+) -> None:
+    # A camera 1.3-1.4 m from a wall with a door in the middle of its view: the wall shows
+    # only beside the door (not above it, nor the floor in front of it), and through the
+    # door 4 m of the next space with a far wall seen top to bottom.
+    room = Room.from_polygon(np.array([[0.0, 0], [6, 0], [6, 5], [0, 5]]), 2.6)
+    furnishing = Furnishing(openings=(Opening(3, door, door + 0.9, 0.0, 2.05),))
+    frame, pose = render_views(room, furnishing, {"f": ((distance, 2.65, 1.3), 180.0, pitch)})["f"]
+    layout = estimate_rgbd_layout(frame)
+    assert layout.ok
+    world = layout.keypoints_local() @ pose[:3, :3].T + pose[:3, 3]
+    np.testing.assert_allclose(world[:, 0], 0.0, atol=0.05)  # on the wall x = 0
+    half = distance * np.tan(np.arctan2(319.5, 525.0))  # the wall from edge to edge of view
+    np.testing.assert_allclose(world[:, 1], [2.65 + half, 2.65 - half], atol=0.15)

@@ -5,15 +5,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import open3d as o3d
 import pytest
 
 from schemas.frames import FrameParams
 from services.frame_merge import frame_features, group_frames, group_layout, match_frames
 from services.rgbd import RgbdFrame
 from services.synthetic.furniture import Furnishing
-from services.synthetic.render import KINECT, _camera_pose, render_frame, scene_mesh
 from services.synthetic.room import Room
+from tests.frame_fixtures import render_views
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -22,15 +21,12 @@ pytestmark = pytest.mark.timeout(60)
 def views() -> dict[str, tuple[RgbdFrame, np.ndarray]]:
     """Frames of one room from one station: a and b overlap (20 degrees apart), c looks away."""
     room = Room.from_polygon(np.array([[0.0, 0], [5, 0], [5, 4], [0, 4]]), 2.6)
-    vertices, triangles, material = scene_mesh(room, Furnishing())
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor.from_numpy(vertices), o3d.core.Tensor.from_numpy(triangles))
-    out = {}
-    for name, yaw in (("a", 90.0), ("b", 110.0), ("c", 270.0)):
-        pose = _camera_pose(np.array([2.5, 1.5, 1.3]), math.radians(yaw), -0.2, 0.0)
-        render = render_frame(scene, material, pose, KINECT, 7.0)
-        out[name] = (RgbdFrame(render.depth, KINECT, render.color), pose)
-    return out
+    pitch = math.degrees(-0.2)
+    stances = {
+        name: ((2.5, 1.5, 1.3), yaw, pitch)
+        for name, yaw in (("a", 90.0), ("b", 110.0), ("c", 270.0))
+    }
+    return render_views(room, Furnishing(), stances)
 
 
 def test_overlapping_frames_merge_with_the_true_motion(views) -> None:

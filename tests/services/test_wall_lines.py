@@ -10,7 +10,7 @@ import pytest
 from schemas.params import LayoutParams
 from services.pipeline import estimate_layout
 from services.synthetic import SceneSpec, generate_scene
-from services.wall_lines import _runs, evidence_threshold, find_wall_lines
+from services.wall_lines import WallLine, _doors_closed, _runs, evidence_threshold, find_wall_lines
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -159,3 +159,37 @@ def test_a_histogram_peak_without_points_near_it_is_skipped():
     fragment = next(f for f in generate_scene(spec, 203008).fragments if f.id == "frag_01")
     layout = estimate_layout(fragment.points)
     assert layout.ok
+
+
+def _occupied_line(occupied: np.ndarray, axis: int = 0, offset: float = 0.0) -> WallLine:
+    """A line at ``offset`` whose cells (0.1 m from run 0) hold wall points where ``occupied``."""
+    return WallLine(
+        axis=axis,
+        offset=offset,
+        travel=1,
+        origin=0.0,
+        cell_size=0.1,
+        high=occupied.copy(),
+        segments=np.array([[0.0, 0.1 * len(occupied)]]),
+        virtual=False,
+        occupied=occupied,
+    )
+
+
+def test_doors_of_a_nearer_wall_are_closed_unless_they_open_onto_a_recess() -> None:
+    # Wall points on [0, 1) m, a 1 m door, points on [2, 3) m, a 2.5 m gap, points again.
+    occupied = np.zeros(80, dtype=bool)
+    occupied[:10] = occupied[20:30] = occupied[55:] = True
+    near = _occupied_line(occupied)
+    closed = _doors_closed(near, [near], away=-1.0)
+    assert closed[10:20].all()  # the door
+    assert not closed[30:55].any()  # too wide for a door: the wall ends there
+    # A wall leaves the door's edge 1 m away from the camera: a recess of the room.
+    side = dataclasses.replace(
+        _occupied_line(np.ones(10, dtype=bool), axis=1, offset=1.0),
+        segments=np.array([[-1.0, 0.0]]),
+    )
+    assert not _doors_closed(near, [near, side], away=-1.0)[10:20].any()
+    # The door's reveal (the wall's 0.15 m thickness) is no recess.
+    reveal = dataclasses.replace(side, segments=np.array([[-0.15, 0.0]]))
+    assert _doors_closed(near, [near, reveal], away=-1.0)[10:20].all()
