@@ -16,16 +16,27 @@ __all__ = ["LayoutMesh", "build_polygon", "layout_mesh"]
 
 
 def _simplify(points: FloatArray, tolerance: float = 1e-3) -> FloatArray:
-    """Drop repeated and collinear vertices of a closed polygon."""
+    """Drop repeated and collinear vertices of a closed polygon.
+
+    Repeats go first: a corner followed by copies of itself has no outgoing direction, and
+    judging it collinear then would drop the corner with its copies.
+
+    >>> square = np.array([[0, 0], [1, 0], [1, 0], [1, 0], [1, 1], [0.5, 1], [0, 1]], float)
+    >>> _simplify(square).tolist()
+    [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]
+    """
     pts = points
     for _ in range(len(points)):
         if len(pts) < 3:
             return pts
         prev, nxt = np.roll(pts, 1, axis=0), np.roll(pts, -1, axis=0)
         a, b = pts - prev, nxt - pts
-        cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
         short = np.linalg.norm(a, axis=1) < tolerance
-        drop = short | (np.abs(cross) < tolerance * np.maximum(np.linalg.norm(b, axis=1), 1e-9))
+        if short.any() and (~short).sum() >= 3:
+            pts = pts[~short]
+            continue
+        cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+        drop = np.abs(cross) < tolerance * np.maximum(np.linalg.norm(b, axis=1), 1e-9)
         if not drop.any():
             return pts
         pts = pts[~drop] if (~drop).sum() >= 3 else pts[:3]
