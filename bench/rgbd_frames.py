@@ -2,11 +2,13 @@
 
 Scenes are rendered by :mod:`services.synthetic.render` (ray casting; Kinect-like depth noise;
 doors and windows seen through; furniture), a few stations per room, frames looking around
-with little or no overlap. Each scene's frames go through the service's stages: the local
-layout of each frame (:func:`services.frame_layout.estimate_rgbd_layout`, as a worker runs
-it) and :func:`services.pipeline.place_site`; scored by :func:`services.evaluation.
-evaluate_result` with the paper's thresholds (5 % of the fragment's / room's diagonal).
-Time per frame is wall clock and process CPU time (all threads; robust to a busy machine).
+with little or no overlap. Each scene's frames go the way ``jigsaw align`` takes them
+(:func:`services.pipeline.align_fragments`): frames that overlap are merged (ORB matches
+verified on the depths), then the local layout of each frame or merged group, then the
+global placement; scored by :func:`services.evaluation.evaluate_result` with the paper's
+thresholds (5 % of the fragment's / room's diagonal). Time per frame is that of each local
+layout (a merged group's counts once), wall clock and process CPU time (all threads; robust
+to a busy machine).
 
     .venv/bin/python bench/rgbd_frames.py [--scenes 20] [--seed 1000] [--shapes]
 
@@ -19,15 +21,42 @@ from __future__ import annotations
 import argparse
 import math
 import statistics
+import sys
 import time
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
-from services.evaluation import evaluate_result
-from services.frame_layout import estimate_rgbd_layout
-from services.pipeline import place_site
-from services.synthetic.render import FrameSpec, frame_ground_truth_json, generate_frame_scene
-from services.types import FloatArray
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # run as a script, the repository's packages are importable
+
+from services.evaluation import evaluate_result  # noqa: E402
+from services.pipeline import align_fragments  # noqa: E402
+from services.synthetic.render import (  # noqa: E402
+    FrameSpec,
+    frame_ground_truth_json,
+    generate_frame_scene,
+)
+from services.types import FloatArray  # noqa: E402
+
+
+@dataclass
+class LayoutClock:
+    """Wall and CPU seconds of each local layout, from the pipeline's progress reports (a
+    stage lasts until the next one is reported)."""
+
+    seconds: list[float] = field(default_factory=list)
+    cpu: list[float] = field(default_factory=list)
+    started: tuple[float, float] | None = None
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        """Close the running layout's time, if any; open one if ``stage`` is a layout."""
+        now = (time.perf_counter(), time.process_time())
+        if self.started is not None:
+            self.seconds.append(now[0] - self.started[0])
+            self.cpu.append(now[1] - self.started[1])
+        self.started = now if stage.startswith("local layout") else None
 
 
 def run(
@@ -36,7 +65,7 @@ def run(
     """Local and global figures over ``n_scenes`` frame scenes from ``first_seed``."""
     spec = FrameSpec()
     local, global_ok, rotation, translation, frames, statuses = [], [], [], [], [], []
-    seconds, cpu = [], []
+    clock = LayoutClock()
     for k in range(n_scenes):
         seed = first_seed + k
         outline = outlines[k % len(outlines)] if outlines else None
@@ -44,13 +73,8 @@ def run(
             scene = generate_frame_scene(spec, seed, outline)
         except RuntimeError:
             continue  # no station tiles this room within range
-        layouts = {}
-        for f in scene.frames:
-            start, start_cpu = time.perf_counter(), time.process_time()
-            layouts[f.id] = estimate_rgbd_layout(f.frame)
-            seconds.append(time.perf_counter() - start)
-            cpu.append(time.process_time() - start_cpu)
-        result = place_site(layouts).model_dump(mode="json")
+        aligned = align_fragments({f.id: f.frame for f in scene.frames}, progress=clock)
+        result = aligned.result.model_dump(mode="json")
         report = evaluate_result(result, frame_ground_truth_json(scene))
         local += list(report.local_correct.values())
         global_ok.append(report.global_correct)
@@ -66,11 +90,18 @@ def run(
         "rotation_deg": float(np.mean(rotation)) if rotation else math.nan,
         "translation_pct": float(np.mean(translation)) if translation else math.nan,
         "closed": statuses.count("closed") + statuses.count("ambiguous"),
-        "ms_per_frame": 1000 * statistics.median(seconds) if seconds else math.nan,
-        "ms_per_frame_p90": 1000 * float(np.percentile(seconds, 90)) if seconds else math.nan,
-        "cpu_ms_per_frame": 1000 * statistics.median(cpu) if cpu else math.nan,
-        "cpu_ms_per_frame_p90": 1000 * float(np.percentile(cpu, 90)) if cpu else math.nan,
+        "ms_per_frame": _median_ms(clock.seconds)[0],
+        "ms_per_frame_p90": _median_ms(clock.seconds)[1],
+        "cpu_ms_per_frame": _median_ms(clock.cpu)[0],
+        "cpu_ms_per_frame_p90": _median_ms(clock.cpu)[1],
     }
+
+
+def _median_ms(values: list[float]) -> tuple[float, float]:
+    """Median and 90th percentile of ``values`` (seconds), in milliseconds."""
+    if not values:
+        return math.nan, math.nan
+    return 1000 * statistics.median(values), 1000 * float(np.percentile(values, 90))
 
 
 def _row(name: str, r: dict[str, float]) -> str:

@@ -1,0 +1,27 @@
+"""The frames benchmark: scenes go the way ``jigsaw align`` takes them, each local layout
+timed once (a merged group's as one)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from bench.rgbd_frames import LayoutClock, run
+
+pytestmark = pytest.mark.timeout(180)
+
+
+def test_each_local_layout_is_timed_until_the_next_stage() -> None:
+    clock = LayoutClock()
+    for stage in ("frame groups", "local layout a", "local layout b", "placement", "done"):
+        clock(stage, 0.0)
+    assert len(clock.seconds) == len(clock.cpu) == 2
+    assert all(s >= 0.0 for s in clock.seconds + clock.cpu)
+
+
+def test_one_scene_is_scored_with_every_frame_timed() -> None:
+    figures = run(1, 1000)
+    assert figures["scenes"] == 1 and figures["frames"] >= 3
+    assert 0.0 <= figures["acc_local"] <= 1.0 and figures["acc_global"] in (0.0, 1.0)
+    assert figures["cpu_ms_per_frame"] > 0.0 and not math.isnan(figures["ms_per_frame_p90"])
