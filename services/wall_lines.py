@@ -479,17 +479,17 @@ def _turned_to_camera(lines: Sequence[WallLine], centre: FloatArray) -> list[Wal
 
 def _doors_closed(near: WallLine, lines: Sequence[WallLine], away: float) -> NDArray[np.bool_]:
     """A line's occupied cells with its doorways filled in: gaps of at most ``_MAX_DOORWAY``
-    between wall points of the line, unless a wall of the other axis leaves it at the gap's
-    edge, going away from the camera (``away``, the sign of the far side's offsets): that gap
-    opens onto a recess of the room, not onto the next room. A frame often sees a door's
-    sides but not the wall over it (the top of its view is lower), and through it a wall of
-    the next room with more evidence than the nearer wall's pieces.
+    between runs of wall points of the line, unless a wall of the other axis leaves the line
+    along a run or the gap, going away from the camera (``away``, the sign of the far side's
+    offsets): that gap opens onto a recess or a wing of the room (its run may be furniture
+    standing at the line), not onto the next room. A frame often sees a door's sides but not
+    the wall over it (the top of its view is lower), and through it a wall of the next room
+    with more evidence than the nearer wall's pieces.
     """
     assert near.occupied is not None
     occupied = near.occupied.copy()
-    held = np.flatnonzero(occupied)
-    width = np.diff(held) - 1
-    doors = np.flatnonzero((width > 0) & (width * near.cell_size <= _MAX_DOORWAY))
+    runs = np.array(_runs(occupied, _MAX_GAP_CELLS, 1)).reshape(-1, 2)  # [start, stop) cells
+    width = (runs[1:, 0] - runs[:-1, 1]) * near.cell_size
     behind = near.offset + away * _RECESS_DEPTH
     sides = np.array(
         [
@@ -501,11 +501,11 @@ def _doors_closed(near: WallLine, lines: Sequence[WallLine], away: float) -> NDA
         ]
     )
     reach = 2 * near.cell_size
-    for k in doors:
+    for k in np.flatnonzero(width <= _MAX_DOORWAY):
         lo, hi = (
-            near.origin + (held[k] + 1) * near.cell_size,
-            near.origin + held[k + 1] * near.cell_size,
+            near.origin + runs[k, 0] * near.cell_size,
+            near.origin + runs[k + 1, 1] * near.cell_size,
         )
         if not np.any((sides >= lo - reach) & (sides <= hi + reach)):
-            occupied[held[k] + 1 : held[k + 1]] = True
+            occupied[runs[k, 1] : runs[k + 1, 0]] = True
     return occupied

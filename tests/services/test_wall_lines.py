@@ -190,6 +190,10 @@ def test_doors_of_a_nearer_wall_are_closed_unless_they_open_onto_a_recess() -> N
         segments=np.array([[-1.0, 0.0]]),
     )
     assert not _doors_closed(near, [near, side], away=-1.0)[10:20].any()
+    # Nor when the wall leaves at the far end of the points beside the gap (a cabinet's face
+    # at the line, in a wing of the room whose side wall stands beyond it).
+    wing = dataclasses.replace(side, offset=2.9)
+    assert not _doors_closed(near, [near, wing], away=-1.0)[10:20].any()
     # The door's reveal (the wall's 0.15 m thickness) is no recess.
     reveal = dataclasses.replace(side, segments=np.array([[-0.15, 0.0]]))
     assert _doors_closed(near, [near, reveal], away=-1.0)[10:20].all()
