@@ -425,7 +425,8 @@ def _facing_cameras(
     and no nearer wall stands between it and them (a wall seen through a door or window of
     a nearer one is the next room's). Cells seen through a nearer line's wall points (at any
     height: a window leaves wall below and above it) or through a door in it
-    (:func:`_doors_closed`) lose their evidence."""
+    (:func:`_doors_closed`) lose their evidence. Cells in a nearer wall's shadow
+    (:func:`_shadowed`) are not taken for open space, whatever lies in front of them."""
     centre = np.mean([view.centre[:2] for view in views], axis=0)
     facing = _turned_to_camera(lines, centre)
     kept = []
@@ -450,8 +451,43 @@ def _facing_cameras(
             segments = np.array(
                 [[far.origin + a * far.cell_size, far.origin + b * far.cell_size] for a, b in spans]
             )
-            kept.append(dataclasses.replace(far, high=high, segments=segments))
+            unsupported = (
+                None
+                if far.unsupported is None
+                else far.unsupported & ~_shadowed(far, facing, centre)
+            )
+            kept.append(
+                dataclasses.replace(far, high=high, segments=segments, unsupported=unsupported)
+            )
     return kept
+
+
+def _shadowed(far: WallLine, lines: Sequence[WallLine], centre: FloatArray) -> NDArray[np.bool_]:
+    """(C,) the cells of ``far`` hidden from the camera at ``centre`` (2,) by a nearer wall
+    segment of another line. Nothing scanned in front of such a cell tells nothing: the
+    camera could not see there, so the wall may run on behind the nearer one (a protruding
+    corner's far side)."""
+    run = far.origin + (np.arange(len(far.high)) + 0.5) * far.cell_size
+    cells = np.column_stack([run, np.full(len(run), far.offset)])
+    if far.axis == 1:
+        cells = cells[:, ::-1]
+    hidden = np.zeros(len(run), dtype=bool)
+    for near in lines:
+        if near.virtual or (
+            near.axis == far.axis and abs(near.offset - far.offset) < _MERGE_DISTANCE
+        ):
+            continue
+        across = cells[:, 1 - near.axis] - centre[1 - near.axis]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (near.offset - centre[1 - near.axis]) / across
+        cross = centre[near.axis] + t * (cells[:, near.axis] - centre[near.axis])
+        on = np.any(
+            (cross[:, None] >= near.segments[None, :, 0])
+            & (cross[:, None] <= near.segments[None, :, 1]),
+            axis=1,
+        )
+        hidden |= (t > 0.0) & (t < 1.0 - _NEAR_STRIP / np.maximum(np.abs(across), _NEAR_STRIP)) & on
+    return hidden
 
 
 def _turned_to_camera(lines: Sequence[WallLine], centre: FloatArray) -> list[WallLine]:

@@ -10,7 +10,14 @@ import pytest
 from schemas.params import LayoutParams
 from services.pipeline import estimate_layout
 from services.synthetic import SceneSpec, generate_scene
-from services.wall_lines import WallLine, _doors_closed, _runs, evidence_threshold, find_wall_lines
+from services.wall_lines import (
+    WallLine,
+    _doors_closed,
+    _runs,
+    _shadowed,
+    evidence_threshold,
+    find_wall_lines,
+)
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -197,3 +204,18 @@ def test_doors_of_a_nearer_wall_are_closed_unless_they_open_onto_a_recess() -> N
     # The door's reveal (the wall's 0.15 m thickness) is no recess.
     reveal = dataclasses.replace(side, segments=np.array([[-0.15, 0.0]]))
     assert _doors_closed(near, [near, reveal], away=-1.0)[10:20].all()
+
+
+def test_a_wall_is_in_shadow_where_a_nearer_wall_stands_between_it_and_the_camera() -> None:
+    # The camera at (2.7, 1.3); a block's side at x = 3.9 for y in [2, 3]; the room's wall at
+    # x = 5 behind it: hidden where the sight line crosses the side, y in [2.64, 4.56].
+    wall = _occupied_line(np.ones(70, dtype=bool), axis=1, offset=5.0)
+    side = dataclasses.replace(
+        _occupied_line(np.ones(70, dtype=bool), axis=1, offset=3.9), segments=np.array([[2.0, 3.0]])
+    )
+    y = 0.1 * np.arange(70) + 0.05
+    hidden = _shadowed(wall, [wall, side], np.array([2.7, 1.3]))
+    np.testing.assert_array_equal(hidden, (y > 2.64) & (y < 4.56))
+    # A wall does not shadow itself, nor does one behind it.
+    behind = dataclasses.replace(side, offset=6.0)
+    assert not _shadowed(wall, [wall, behind], np.array([2.7, 1.3])).any()
