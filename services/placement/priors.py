@@ -30,12 +30,16 @@ __all__ = [
     "hint_pairs",
     "piece_prior",
     "position_costs",
+    "position_costs_batch",
     "robust_cost",
     "wrap_angle",
 ]
 
 _ROBUST_SCALE = 2.0  # nats: beyond a few sigma a hint's cost grows only logarithmically
 _REWEIGHTS = 8  # iterations of the robust frame fit
+# x and y of a point (x, y) turned by q quarter turns, q = 0..3 (rows).
+_QUARTER_X = np.array([[1.0, 0.0], [0.0, -1.0], [-1.0, 0.0], [0.0, 1.0]])
+_QUARTER_Y = np.array([[0.0, 1.0], [1.0, 0.0], [0.0, -1.0], [-1.0, 0.0]])
 _OUTLIER_MISFIT = 11.34  # squared Mahalanobis distance: chi-square 99 % with 3 dof (x, y, yaw)
 
 
@@ -207,21 +211,35 @@ def position_costs(anchors: Sequence[tuple[float, float, float, float, float]]) 
     """
     if len(anchors) < 2:
         return np.zeros(4)
-    a = np.asarray(anchors, dtype=np.float64)
-    prior, placed, w = a[:, :2], a[:, 2:4], a[:, 4]
-    tx, ty = placed[:, 0], placed[:, 1]
-    turned = np.stack(  # (4, k, 2): the placed sources under each quarter turn of the frame
-        [np.column_stack(xy) for xy in ((tx, ty), (-ty, tx), (-tx, -ty), (ty, -tx))]
-    )
-    d = prior[None] - turned
-    c = np.ones((4, len(a)))
-    misfit = np.zeros((4, len(a)))
+    costs: FloatArray = position_costs_batch(np.asarray(anchors, dtype=np.float64)[None])[0]
+    return costs
+
+
+def position_costs_batch(anchors: FloatArray) -> FloatArray:
+    """:func:`position_costs` of B sets of k anchors at once: (B, k, 5) -> (B, 4).
+
+    >>> one = [(0.0, 0.0, 0.0, 0.0, 1.0), (2.0, 0.0, 2.0, 0.0, 1.0)]
+    >>> costs = position_costs_batch(np.array([one, one]))
+    >>> costs.shape, bool(np.allclose(costs[1], position_costs(one)))
+    ((2, 4), True)
+    """
+    w = anchors[:, None, :, 4]  # (B, 1, k)
+    # (B, 4, k, 2): prior less placed source under each quarter turn of the frame, x and y
+    # apart (small arrays: fewer, simpler operations are what costs time here).
+    placed = anchors[:, :, 2:4]
+    dx = (anchors[:, :, 0:1] - placed @ _QUARTER_X.T).transpose(0, 2, 1)
+    dy = (anchors[:, :, 1:2] - placed @ _QUARTER_Y.T).transpose(0, 2, 1)
+    stacked = np.stack([dx, dy, np.ones(dx.shape)], axis=-1)  # (B, 4, k, 3)
+    squared = dx * dx + dy * dy
+    c = np.ones(dx.shape)
+    misfit = c
     for _ in range(_REWEIGHTS):
-        cw = c * w
-        shift = np.einsum("qk,qkd->qd", cw, d) / cw.sum(axis=1, keepdims=True)
-        misfit = w * np.sum((d - shift[:, None, :]) ** 2, axis=2)
+        # Weighted sums of dx, dy and the weights in one product: the fitted shift (mx, my).
+        sums = (c * w)[:, :, None, :] @ stacked  # (B, 4, 1, 3)
+        mx, my = sums[..., 0] / sums[..., 2], sums[..., 1] / sums[..., 2]
+        misfit = w * (squared - 2.0 * (dx * mx + dy * my) + mx * mx + my * my)
         c = _cauchy_weights(misfit)
-    costs: FloatArray = (_ROBUST_SCALE * np.log1p(0.5 * misfit / _ROBUST_SCALE)).sum(axis=1)
+    costs: FloatArray = (_ROBUST_SCALE * np.log1p((0.5 / _ROBUST_SCALE) * misfit)).sum(axis=2)
     return costs
 
 

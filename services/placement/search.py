@@ -41,6 +41,7 @@ from services.placement.priors import (
     SiteHints,
     frame_estimate,
     position_costs,
+    position_costs_batch,
     robust_cost,
     wrap_angle,
 )
@@ -132,6 +133,13 @@ class _Search:
     reach: FloatArray = field(init=False)  # [j, d]: piece j's reach along direction d
     chain_ends: FloatArray = field(init=False)  # [j, r]: piece j's target at rotation r
     displacement: list[list[tuple[FloatArray, FloatArray]]] = field(init=False)  # [in][out]
+    # The same as arrays (4, 4, 2) [in, out]: mean and variance of a junction's displacement.
+    step_mean: FloatArray = field(init=False)
+    step_var: FloatArray = field(init=False)
+    # Per piece: its prior's source (n, 2), that source's variance (n,), whether it has one.
+    prior_source: FloatArray = field(init=False)
+    prior_variance: FloatArray = field(init=False)
+    has_prior: np.ndarray = field(init=False)
     top: list[tuple[float, int, PlacementCandidate]] = field(default_factory=list)
     breadth: int | None = None
     lowest: float = np.inf  # energy of the best leaf so far
@@ -157,6 +165,16 @@ class _Search:
             [junction_displacement(self.noise, h_in, h_out) for h_out in range(4)]
             for h_in in range(4)
         ]
+        self.step_mean = np.array([[m for m, _ in row] for row in self.displacement])
+        self.step_var = np.array([[v for _, v in row] for row in self.displacement])
+        priors = [self.hints.priors.get(p.id) for p in self.pieces]
+        self.has_prior = np.array([prior is not None for prior in priors], dtype=bool)
+        self.prior_source = np.array(
+            [np.zeros(2) if prior is None else prior.source for prior in priors]
+        ).reshape(-1, 2)
+        self.prior_variance = np.array(
+            [1.0 if prior is None else prior.source_sigma**2 for prior in priors]
+        )
         ends = [np.stack([rot90(r) @ p.keypoints[-1] for r in range(4)]) for p in self.pieces]
         self.reach = np.array([(_CLOSURE_DIRECTIONS @ e.T).max(axis=1) for e in ends])
         self.chain_ends = np.array(
@@ -289,6 +307,7 @@ class _State:
     # with most priors on its side decides. (4,) cost of the placed pieces' rotations:
     rotation_prior: FloatArray = field(default_factory=lambda: np.zeros(4))
     anchors: tuple[tuple[float, float, float, float, float], ...] = ()  # priors.position_costs
+    position: FloatArray = field(default_factory=lambda: np.zeros(4))  # their costs, (4,)
 
     def energy(self, weights: FloatArray) -> float:
         return float(weights @ self.features)
@@ -391,9 +410,12 @@ def _resolve_pairs(
     return tuple(violated), frozenset(resolved)
 
 
-def _extend(search: _Search, state: _State, j: int, turn: int) -> _State | None:
+def _extend(
+    search: _Search, state: _State, j: int, turn: int, position: FloatArray | None = None
+) -> _State | None:
     """The state with piece j appended after a junction that turns by ``turn``, or None
-    when its walls would cross the placed ones."""
+    when its walls would cross the placed ones. ``position``: the child's position costs
+    when already known (:func:`_bounds`)."""
     piece = search.pieces[j]
     rotation = (state.heading + turn - piece.directions[0]) % 4
     local_pts, local_walls, local_samples = piece.rotated[rotation]
@@ -415,8 +437,12 @@ def _extend(search: _Search, state: _State, j: int, turn: int) -> _State | None:
     rotations_cost = state.rotation_prior + search.turned_rotation_cost[j, rotation]
     anchor = _anchor(search, j, state.end, drift_mean, drift_var)
     anchors = state.anchors if anchor is None else (*state.anchors, anchor)
+    if anchor is None:
+        position = state.position
+    elif position is None:
+        position = position_costs(anchors)
     if search.frame is not None:
-        features[_F["prior"]] = float((rotations_cost + position_costs(anchors)).min())
+        features[_F["prior"]] = float((rotations_cost + position).min())
     child = _State(
         order=(*state.order, j),
         rotations=(*state.rotations, rotation),
@@ -435,6 +461,7 @@ def _extend(search: _Search, state: _State, j: int, turn: int) -> _State | None:
         resolved=state.resolved,
         rotation_prior=rotations_cost,
         anchors=anchors,
+        position=position,
     )
     if search.pairs:
         violated, resolved = _resolve_pairs(search, child, {})
@@ -491,12 +518,13 @@ def _dfs(search: _Search, state: _State, remaining: tuple[int, ...]) -> None:
     options = _options(search, state, remaining)
     if not options:
         return
-    ranked = sorted(zip(_bounds(search, state, remaining, options), options, strict=True))
+    bounds, positions = _bounds(search, state, remaining, options)
+    ranked = sorted(zip(bounds, options, range(len(options)), strict=True))
     expanded = 0
-    for lower_bound, (j, turn) in ranked:
+    for lower_bound, (j, turn), k in ranked:
         if lower_bound >= search.threshold() or search.out_of_budget():
             return
-        child = _extend(search, state, j, turn)
+        child = _extend(search, state, j, turn, None if positions is None else positions[k])
         if child is not None:
             _dfs(search, child, tuple(i for i in remaining if i != j))
             expanded += 1
@@ -513,21 +541,28 @@ def _beam(search: _Search, root: _State, width: int) -> None:
     n = len(search.pieces)
     layer = [root]
     for _ in range(1, n):
-        scored: list[tuple[float, int, int, int]] = []
+        scored: list[tuple[float, int, int, int, int]] = []
+        known: list[FloatArray | None] = []  # per parent: its children's position costs
         for k, state in enumerate(layer):
             placed = set(state.order)
             remaining = tuple(i for i in range(1, n) if i not in placed)
             options = _options(search, state, remaining)
-            bounds = _bounds(search, state, remaining, options) if options else []
-            scored += [(b, k, j, turn) for b, (j, turn) in zip(bounds, options, strict=True)]
+            bounds, positions = _bounds(search, state, remaining, options)
+            known.append(positions)
+            scored += [
+                (b, k, j, turn, c)
+                for c, (b, (j, turn)) in enumerate(zip(bounds, options, strict=True))
+            ]
         scored.sort()
         parents, layer = layer, []
         seen: set[tuple[object, ...]] = set()
-        for bound, k, j, turn in scored:
+        for bound, k, j, turn, c in scored:
             if len(layer) >= width or bound >= search.threshold() or search.out_of_budget():
                 break
             search.nodes += 1
-            child = _extend(search, parents[k], j, turn)
+            positions = known[k]
+            position = None if positions is None else positions[c]
+            child = _extend(search, parents[k], j, turn, position)
             if child is None:
                 continue
             end = np.round(child.end, 1).tolist()
@@ -541,8 +576,11 @@ def _beam(search: _Search, root: _State, width: int) -> None:
 
 def _bounds(
     search: _Search, state: _State, remaining: tuple[int, ...], options: list[tuple[int, int]]
-) -> list[float]:
-    """Lower bound of the energy of every leaf below each child (piece, turn)."""
+) -> tuple[list[float], FloatArray | None]:
+    """Lower bound of the energy of every leaf below each child (piece, turn), and with
+    priors each child's position costs ((C, 4), see :func:`_child_priors`)."""
+    if not options:
+        return [], None
     pieces, weights, noise = search.pieces, search.weights, search.noise
     rest = list(remaining)
     turning = state.turning + sum(pieces[i].turning for i in rest)
@@ -587,10 +625,46 @@ def _bounds(
     # The junction into j replaces the cheapest way into j counted in entry_total.
     bounds = base + weights[_F["turns"]] * turn_cost
     bounds += search.junction[state.order[-1], js] + entry_total - entry_of[js]
+    positions = None
+    if search.frame is not None:
+        # The child's own prior is known exactly: it replaces the state's and the floor
+        # counted for j's rotation.
+        own, positions = _child_priors(search, state, js, rotations)
+        floor_of_j = search.rotation_cost[js].min(axis=1)
+        bounds += weights[_F["prior"]] * (own - state.features[_F["prior"]] - floor_of_j)
     if search.require_closed:
         bounds += weights[_F["closure"]] * closure
     out: list[float] = bounds.tolist()
-    return out
+    return out, positions
+
+
+def _child_priors(
+    search: _Search, state: _State, js: list[int], rotations: list[int]
+) -> tuple[FloatArray, FloatArray]:
+    """The prior feature of each child (piece js[c] at rotations[c], its source at the
+    state's end), as :func:`_extend` computes it: rotation costs and position costs (see
+    :func:`_anchor`), the least over the frame's quarter turns; and the position costs
+    per quarter turn (C, 4)."""
+    frame = search.frame
+    assert frame is not None
+    pieces = np.asarray(js)
+    costs = state.rotation_prior[None, :] + search.turned_rotation_cost[pieces, rotations]
+    position = np.tile(state.position, (len(js), 1))
+    with_prior = np.flatnonzero(search.has_prior[pieces])
+    if len(with_prior) and state.anchors:
+        chosen = pieces[with_prior]
+        headings = (np.array([search.pieces[j].directions[0] for j in chosen])
+                    + np.asarray(rotations)[with_prior]) % 4  # fmt: skip
+        drift_mean = state.mean + search.step_mean[state.heading, headings]
+        drift_var = state.var + search.step_var[state.heading, headings]
+        c, s = np.cos(frame.yaw), np.sin(frame.yaw)
+        turned = (state.end + drift_mean) @ np.array([[c, -s], [s, c]]).T
+        variance = search.prior_variance[chosen] + float(state.end @ state.end) * frame.variance
+        variance = variance + drift_var.mean(axis=1)
+        new = np.column_stack([search.prior_source[chosen], turned, 1.0 / variance])
+        placed = np.broadcast_to(np.asarray(state.anchors), (len(chosen), len(state.anchors), 5))
+        position[with_prior] = position_costs_batch(np.concatenate([placed, new[:, None]], 1))
+    return (costs + position).min(axis=1), position
 
 
 def _options(search: _Search, state: _State, remaining: tuple[int, ...]) -> list[tuple[int, int]]:

@@ -17,6 +17,7 @@ from services.placement import (
     place_pieces,
     translations_of,
 )
+from services.placement import search as search_module
 from services.placement.priors import HintPair, PiecePrior
 from tests.conftest import UNTUNED, bare_piece, chains_from_polygon
 
@@ -124,6 +125,51 @@ def test_search_with_priors_finds_the_brute_force_minimum(l_room, seed):
     assert placement is not None and placement.exhaustive
     assert placement.best.energy == pytest.approx(min(c.energy for c in every), abs=1e-9)
     assert placement.best.features["prior"] > 0.0  # the priors did take part
+
+
+def _cut_with_priors(polygon, seed, n, noise):
+    """The room cut into n turned pieces at random, and priors near the truth."""
+    rng = np.random.default_rng(seed)
+    cuts = _random_cuts(rng, n)
+    turns = rng.integers(0, 4, n).tolist()
+    pieces = chains_from_polygon(polygon, cuts, turns)
+    return pieces, _truth_priors(polygon, cuts, turns, rng, noise=noise)
+
+
+def test_priors_prune_the_search(l_room):
+    # Each child's own prior cost enters its bound: with priors near the truth, children
+    # far from their priors are cut before they are expanded.
+    pieces, hints = _cut_with_priors(l_room, 7, 7, noise=(0.3, 0.05))
+    blind = place_pieces(pieces, GEOMETRY)
+    guided = place_pieces(pieces, GEOMETRY, hints)
+    assert blind is not None and guided is not None
+    assert blind.exhaustive and guided.exhaustive
+    assert guided.best.order == tuple(f"p{k}" for k in range(7))
+    assert guided.nodes_searched < blind.nodes_searched / 2
+
+
+def test_a_childs_bound_holds_its_own_prior_exactly(l_room):
+    # The bound of a child counts the child's prior cost as its extension will: equal, so
+    # the bound is as tight as it can be and still never above a leaf below it.
+    pieces, hints = _cut_with_priors(l_room, 3, 6, noise=(0.8, 0.2))
+    search = search_module._Search(pieces, GEOMETRY, hints, True)
+    state, remaining = search_module._root(search), tuple(range(1, len(pieces)))
+    prior = search_module._F["prior"]
+    for _ in range(3):
+        options = search_module._options(search, state, remaining)
+        js = [j for j, _ in options]
+        rotations = [(state.heading + t - pieces[j].directions[0]) % 4 for j, t in options]
+        own, positions = search_module._child_priors(search, state, js, rotations)
+        children = [search_module._extend(search, state, j, t) for j, t in options]
+        valid = [k for k, child in enumerate(children) if child is not None]
+        assert valid
+        for k in valid:
+            assert own[k] == pytest.approx(children[k].features[prior], abs=1e-9)
+            assert positions[k] == pytest.approx(children[k].position, abs=1e-9)
+        best = min(valid, key=lambda k: own[k])
+        state = children[best]
+        remaining = tuple(i for i in remaining if i != options[best][0])
+    assert state.features[prior] > 0.0
 
 
 def _truth_priors(polygon, cuts, turns, rng=None, noise=(0.0, 0.0), frame=(0.5, (3.0, -1.0))):
