@@ -160,14 +160,14 @@ def test_a_childs_bound_holds_its_own_prior_exactly(l_room):
         js = [j for j, _ in options]
         rotations = [(state.heading + t - pieces[j].directions[0]) % 4 for j, t in options]
         own, positions = search_module._child_priors(search, state, js, rotations)
-        children = [search_module._extend(search, state, j, t) for j, t in options]
-        valid = [k for k, child in enumerate(children) if child is not None]
+        extended = [search_module._extend(search, state, j, t) for j, t in options]
+        valid = {k: child for k, child in enumerate(extended) if child is not None}
         assert valid
-        for k in valid:
-            assert own[k] == pytest.approx(children[k].features[prior], abs=1e-9)
-            assert positions[k] == pytest.approx(children[k].position, abs=1e-9)
+        for k, child in valid.items():
+            assert own[k] == pytest.approx(child.features[prior], abs=1e-9)
+            assert positions[k] == pytest.approx(child.position, abs=1e-9)
         best = min(valid, key=lambda k: own[k])
-        state = children[best]
+        state = valid[best]
         remaining = tuple(i for i in remaining if i != options[best][0])
     assert state.features[prior] > 0.0
 
