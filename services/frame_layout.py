@@ -172,28 +172,26 @@ def _flatten_furniture(keypoints: FloatArray) -> FloatArray:
     return _flatten_ends(kp)
 
 
-def _flatten_corner_fronts(keypoints: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
+def _flatten_corner_fronts(keypoints: FloatArray) -> FloatArray:
     """The chain without shallow fronts standing in a room's corner.
 
     A wardrobe against wall B, next to the corner with wall A, hides that corner: the chain
     runs along A, turns onto the wardrobe's front F (parallel to B, less than
-    ``_MAX_FURNITURE_DEPTH`` in front of it) and steps back out to B along a deduced wall G
-    (the wardrobe's side, which the camera does not see); the room's corner is where A's and
-    B's lines meet. A step whose wall G was seen is the room's own and kept. Checked in both
-    walking directions (the same front at the chain's other corner).
+    ``_MAX_FURNITURE_DEPTH`` in front of it) and steps back out to B along the wardrobe's
+    side G; the room's corner is where A's and B's lines meet. Whether or not G was seen:
+    from most stances a wardrobe's side is, and a frame cannot tell a step of the room that
+    shallow from a wardrobe (as :func:`_flatten_furniture` assumes along a wall). Checked in
+    both walking directions (the same front at the chain's other corner).
 
     keypoints: (K, 2) float64, aligned frame, source to target.
     """
     kp = keypoints.copy()
-    for flip in (np.array([1.0, 1.0]), np.array([1.0, -1.0])):  # forwards, then backwards
+    for _ in range(2):  # forwards, then backwards
         k = 0
         while k + 4 < len(kp):
-            step = (kp[k + 2], kp[k + 3]) if flip[1] > 0 else (kp[k + 3], kp[k + 2])
-            seen = _wall_line(lines, step[0] * flip, step[1] * flip)
             depth = _inward_depth(kp, k + 3, kp[k + 1 : k + 3])
             if (
-                (seen is None or seen.virtual)
-                and _same_travel(kp, k + 1, k + 3)
+                _same_travel(kp, k + 1, k + 3)
                 and _same_travel(kp, k, k + 2)
                 and np.all((depth > _ON_LINE) & (depth < _MAX_FURNITURE_DEPTH))
             ):
@@ -344,7 +342,7 @@ def estimate_frame_layout(
     if chain is None or len(chain.keypoints) < 2:
         report("done", 1.0)
         return LocalLayout(keypoints=np.zeros((0, 2)), frame=frame, footprint=footprint)
-    kp = _flatten_furniture(_flatten_corner_fronts(chain.keypoints, lines))
+    kp = _flatten_furniture(_flatten_corner_fronts(chain.keypoints))
     kp = _to_frustum_edges(kp, lines, views)
     band, depth = params.layout.end_region_beyond, params.layout.end_region_depth
     report("done", 1.0)
