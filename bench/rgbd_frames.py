@@ -89,7 +89,11 @@ def run(
         "acc_global": float(np.mean(global_ok)) if global_ok else math.nan,
         "rotation_deg": float(np.mean(rotation)) if rotation else math.nan,
         "translation_pct": float(np.mean(translation)) if translation else math.nan,
-        "closed": statuses.count("closed") + statuses.count("ambiguous"),
+        "closed": statuses.count("closed"),
+        "closed_right": sum(
+            ok for ok, status in zip(global_ok, statuses, strict=True) if status == "closed"
+        ),
+        "ambiguous": statuses.count("ambiguous"),
         "ms_per_frame": _median_ms(clock.seconds)[0],
         "ms_per_frame_p90": _median_ms(clock.seconds)[1],
         "cpu_ms_per_frame": _median_ms(clock.cpu)[0],
@@ -108,7 +112,8 @@ def _row(name: str, r: dict[str, float]) -> str:
     return (
         f"| {name} | {r['scenes']} | {r['frames']} | {100 * r['acc_local']:.1f} | "
         f"{100 * r['acc_global']:.1f} | {r['rotation_deg']:.2f} | {r['translation_pct']:.2f} | "
-        f"{r['closed']} | {r['ms_per_frame']:.0f} ({r['ms_per_frame_p90']:.0f}) | "
+        f"{r['closed']} ({r['closed_right']}) | {r['ambiguous']} | "
+        f"{r['ms_per_frame']:.0f} ({r['ms_per_frame_p90']:.0f}) | "
         f"{r['cpu_ms_per_frame']:.0f} ({r['cpu_ms_per_frame_p90']:.0f}) |"
     )
 
@@ -122,9 +127,10 @@ def main() -> None:
     args = parser.parse_args()
     print(
         "| rooms | scenes | frames | ACC_local % | ACC_global % | rotation deg | "
-        "translation % | closed | ms/frame median (p90) | CPU ms/frame median (p90) |"
+        "translation % | said closed (right) | ambiguous | ms/frame median (p90) | "
+        "CPU ms/frame median (p90) |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     print(_row("synthetic", run(args.scenes, args.seed)))
     if args.shapes:
         from bench.room_shapes import DEFAULT_PATH, load_room_shapes, split_houses

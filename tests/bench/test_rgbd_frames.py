@@ -25,3 +25,7 @@ def test_one_scene_is_scored_with_every_frame_timed() -> None:
     assert figures["scenes"] == 1 and figures["frames"] >= 3
     assert 0.0 <= figures["acc_local"] <= 1.0 and figures["acc_global"] in (0.0, 1.0)
     assert figures["cpu_ms_per_frame"] > 0.0 and not math.isnan(figures["ms_per_frame_p90"])
+    # The statuses are counted apart: closed (and how many of those are right), ambiguous.
+    assert figures["closed"] + figures["ambiguous"] <= 1
+    assert figures["closed_right"] <= figures["closed"]
+    assert figures["closed_right"] == (figures["closed"] == 1 and figures["acc_global"] == 1.0)
