@@ -23,6 +23,7 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
+from numpy.typing import NDArray
 
 from schemas.params import PlacementParams
 from services.placement.energy import (
@@ -267,22 +268,37 @@ def _anchor(
     drift_mean: FloatArray,
     drift_var: FloatArray,
 ) -> tuple[float, float, float, float, float] | None:
-    """Piece j's prior against its placed source (site frame), for :func:`position_costs`.
+    """Piece j's prior against its placed source (site frame), for :func:`position_costs`;
+    None without a prior (:func:`_anchor_rows`, for one piece)."""
+    if search.frame is None or not search.has_prior[j]:
+        return None
+    row = _anchor_rows(search, np.array([j]), source, drift_mean[None], drift_var[None])[0]
+    px, py, tx, ty, weight = row.tolist()
+    return (px, py, tx, ty, weight)
+
+
+def _anchor_rows(
+    search: _Search,
+    js: NDArray[np.intp],
+    source: FloatArray,
+    drift_mean: FloatArray,
+    drift_var: FloatArray,
+) -> FloatArray:
+    """(m, 5) anchors (prior source, placed source turned into the hints frame, 1 / variance)
+    of pieces ``js``, each with a prior, whose source lies at ``source`` (2,).
 
     ``source`` is where the end-to-end concatenation puts it; the junctions on the way
     hide displacements (overlaps, gaps) that add up to ``drift_mean`` and ``drift_var``
-    (per axis), so the source really lies there give or take that much.
+    ((m, 2), per axis), so the source really lies there give or take that much.
     """
-    frame, prior = search.frame, search.hints.priors.get(search.pieces[j].id)
-    if frame is None or prior is None:
-        return None
+    frame = search.frame
+    assert frame is not None
     c, s = np.cos(frame.yaw), np.sin(frame.yaw)
-    turned = np.array([[c, -s], [s, c]]) @ (source + drift_mean)
+    turned = (source + drift_mean) @ np.array([[c, -s], [s, c]]).T
     # The frame's yaw is uncertain: the further from the first piece, the more it moves.
-    variance = prior.source_sigma**2 + float(source @ source) * frame.variance
-    variance += float(drift_var.mean())  # isotropic: the drift's axes turn into the hints'
-    (px, py), (tx, ty) = prior.source.tolist(), turned.tolist()
-    return (px, py, tx, ty, 1.0 / variance)
+    variance = search.prior_variance[js] + float(source @ source) * frame.variance
+    variance = variance + drift_var.mean(axis=1)  # isotropic: the drift's axes turn
+    return np.column_stack([search.prior_source[js], turned, 1.0 / variance])
 
 
 @dataclass(frozen=True)
@@ -645,8 +661,6 @@ def _child_priors(
     state's end), as :func:`_extend` computes it: rotation costs and position costs (see
     :func:`_anchor`), the least over the frame's quarter turns; and the position costs
     per quarter turn (C, 4)."""
-    frame = search.frame
-    assert frame is not None
     pieces = np.asarray(js)
     costs = state.rotation_prior[None, :] + search.turned_rotation_cost[pieces, rotations]
     position = np.tile(state.position, (len(js), 1))
@@ -657,11 +671,7 @@ def _child_priors(
                     + np.asarray(rotations)[with_prior]) % 4  # fmt: skip
         drift_mean = state.mean + search.step_mean[state.heading, headings]
         drift_var = state.var + search.step_var[state.heading, headings]
-        c, s = np.cos(frame.yaw), np.sin(frame.yaw)
-        turned = (state.end + drift_mean) @ np.array([[c, -s], [s, c]]).T
-        variance = search.prior_variance[chosen] + float(state.end @ state.end) * frame.variance
-        variance = variance + drift_var.mean(axis=1)
-        new = np.column_stack([search.prior_source[chosen], turned, 1.0 / variance])
+        new = _anchor_rows(search, chosen, state.end, drift_mean, drift_var)
         placed = np.broadcast_to(np.asarray(state.anchors), (len(chosen), len(state.anchors), 5))
         position[with_prior] = position_costs_batch(np.concatenate([placed, new[:, None]], 1))
     return (costs + position).min(axis=1), position
