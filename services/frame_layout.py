@@ -25,7 +25,7 @@ from services.manhattan import estimate_manhattan_frame, thin_with_normals
 from services.rgbd import OPTICAL_TO_LEVEL, RgbdFrame, backproject
 from services.types import FloatArray, LocalLayout, ManhattanFrame, ProgressFn
 from services.wall_graph import find_wall_chain
-from services.wall_lines import WallLine, find_wall_lines
+from services.wall_lines import MAX_DOORWAY, WallLine, find_wall_lines
 
 _FLAT_COS = float(np.cos(np.radians(10.0)))  # a normal this close to +z: horizontal surface
 _SPACING = 0.03  # m, largest spacing of a frame's points at 4 m (sets the pixel stride)
@@ -33,7 +33,6 @@ _FLOOR_BAND = 0.05  # m, points this close to the floor height lie on the floor
 _MIN_FLOOR_POINTS = 50
 _MIN_HEIGHT, _MAX_HEIGHT = 0.2, 2.5  # m, camera heights over a floor that can be one
 _MAX_EXTENSION = 3.0  # m, farthest a chain end is moved out to the frustum's edge
-_MAX_DOORWAY = 2.0  # m, as services.wall_graph's edges
 _MIN_TURN = 0.3  # m, least length of a wall the chain's last wall turns onto (a reveal is less)
 _MAX_FURNITURE_DEPTH = 0.75  # m, deepest step into the room read as a furniture front
 _ON_LINE = 0.1  # m, a keypoint this close to a wall's line lies on it
@@ -277,7 +276,7 @@ def _to_frustum_edges(
         moved = keypoints[end] + reach * outward
         start, stop = float(keypoints[end][line.axis]), float(moved[line.axis])
         if not _wall_across(lines, line, start, stop) and (
-            line.crossing_gap(start, stop) <= _MAX_DOORWAY
+            line.crossing_gap(start, stop) <= MAX_DOORWAY
         ):
             out[end] = moved
     return out

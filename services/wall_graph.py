@@ -19,14 +19,13 @@ from scipy.sparse.csgraph import dijkstra, minimum_spanning_tree
 from schemas.params import LayoutParams
 from services.frustum import CameraView, in_any_view
 from services.types import FloatArray
-from services.wall_lines import WallLine
+from services.wall_lines import MAX_DOORWAY, WallLine
 
 __all__ = ["WallChain", "find_wall_chain"]
 
 _CORNER_REACH = 3.0  # m, how far past a segment's end a deduced corner may lie
 _OCCLUSION_REACH = 3.0  # m, longest gap the ST-graph links across on one line
 _MAX_OPEN_GAP = 0.5  # m, longest stretch a wall may run with nothing scanned beside it
-_MAX_DOORWAY = 2.0  # m, longest stretch a wall may run with space seen on both sides
 _CORNER_METERS = 0.3  # covered wall a corner must add to be worth it, m
 _COST_METERS = 0.1  # tie-break: meters of covered wall per unit of path cost
 _SNAP_CELLS = 2.0  # a segment end this close to a deduced corner is merged into it
@@ -133,7 +132,7 @@ def _edges(
                     high == 0
                     or length <= 0
                     or line.open_gap(ru, rv) > _MAX_OPEN_GAP
-                    or line.crossing_gap(ru, rv) > _MAX_DOORWAY
+                    or line.crossing_gap(ru, rv) > MAX_DOORWAY
                 ):
                     continue
                 # Cells are counted whole, so H may exceed the fractional L by a rounding.

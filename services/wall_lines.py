@@ -24,7 +24,7 @@ from schemas.params import LayoutParams
 from services.frustum import CameraView, visible_band
 from services.types import FloatArray
 
-__all__ = ["WallLine", "evidence_threshold", "find_wall_lines"]
+__all__ = ["MAX_DOORWAY", "WallLine", "evidence_threshold", "find_wall_lines"]
 
 _HIST_BIN = 0.01  # m, offset histogram resolution
 _LINE_TOLERANCE = 0.05  # m, wall points kept around a line offset
@@ -38,7 +38,9 @@ _SUPPORT_POINTS = 3  # interior-strip points that show the line's cell borders s
 _TOP_REACH = 0.85  # share of the floor-to-ceiling band a wall column must reach
 _MIN_VISIBLE = 0.5  # m, least height of a column a camera must see to judge it
 _AXIS_COS = float(np.cos(np.radians(25.0)))  # a normal within 25 deg of an axis faces along it
-_MAX_DOORWAY = 2.0  # m, widest gap in a wall read as a door (as services.wall_graph's edges)
+# m, widest doorway: a gap in a wall read as a door here, and the longest stretch a wall may
+# run with space seen on both sides (services.wall_graph, services.frame_layout)
+MAX_DOORWAY = 2.0
 _RECESS_DEPTH = 0.3  # m, a wall reaching this far behind a gap's edge: a recess, not a door
 
 
@@ -514,7 +516,7 @@ def _turned_to_camera(lines: Sequence[WallLine], centre: FloatArray) -> list[Wal
 
 
 def _doors_closed(near: WallLine, lines: Sequence[WallLine], away: float) -> NDArray[np.bool_]:
-    """A line's occupied cells with its doorways filled in: gaps of at most ``_MAX_DOORWAY``
+    """A line's occupied cells with its doorways filled in: gaps of at most ``MAX_DOORWAY``
     between runs of wall points of the line, unless a wall of the other axis leaves the line
     along a run or the gap, going away from the camera (``away``, the sign of the far side's
     offsets): that gap opens onto a recess or a wing of the room (its run may be furniture
@@ -537,7 +539,7 @@ def _doors_closed(near: WallLine, lines: Sequence[WallLine], away: float) -> NDA
         ]
     )
     reach = 2 * near.cell_size
-    for k in np.flatnonzero(width <= _MAX_DOORWAY):
+    for k in np.flatnonzero(width <= MAX_DOORWAY):
         lo, hi = (
             near.origin + runs[k, 0] * near.cell_size,
             near.origin + runs[k + 1, 1] * near.cell_size,
