@@ -82,6 +82,8 @@ def run(
         frames.append(len(scene.frames))
         rotation += [e.rotation_deg for e in report.pose_errors.values()]
         translation += [e.translation_pct for e in report.pose_errors.values()]
+    ms, ms_p90 = _median_ms(clock.seconds)
+    cpu_ms, cpu_ms_p90 = _median_ms(clock.cpu)
     return {
         "scenes": len(global_ok),
         "frames": sum(frames),
@@ -94,10 +96,10 @@ def run(
             ok for ok, status in zip(global_ok, statuses, strict=True) if status == "closed"
         ),
         "ambiguous": statuses.count("ambiguous"),
-        "ms_per_frame": _median_ms(clock.seconds)[0],
-        "ms_per_frame_p90": _median_ms(clock.seconds)[1],
-        "cpu_ms_per_frame": _median_ms(clock.cpu)[0],
-        "cpu_ms_per_frame_p90": _median_ms(clock.cpu)[1],
+        "ms_per_frame": ms,
+        "ms_per_frame_p90": ms_p90,
+        "cpu_ms_per_frame": cpu_ms,
+        "cpu_ms_per_frame_p90": cpu_ms_p90,
     }
 
 
