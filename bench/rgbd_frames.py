@@ -11,9 +11,15 @@ layout (a merged group's counts once), wall clock and process CPU time (all thre
 to a busy machine).
 
     .venv/bin/python bench/rgbd_frames.py [--scenes 20] [--seed 1000] [--shapes]
+    .venv/bin/python bench/rgbd_frames.py --fit --scenes 120 --seed 2000 --shapes
 
 ``--shapes`` also runs rooms of real shapes (the MatterportLayout outlines of
 ``../shared/data``, the benchmark's test split) when present.
+
+``--fit`` fits the frames' map of the confidence's logit (``frame_calibration``,
+:mod:`services.confidence`) instead: the scenes run with the map off, then a logistic
+regression of right/wrong on the logit; use tune seeds (< 1000) and, with ``--shapes``, the
+shapes' tune split. It prints the map and what it does to those scenes' closed results.
 """
 
 from __future__ import annotations
@@ -25,12 +31,15 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run as a script, the repository's packages are importable
 
+from bench.tune_placement import fit_logistic  # noqa: E402
+from schemas.params import PipelineParams  # noqa: E402
 from services.evaluation import evaluate_result  # noqa: E402
 from services.pipeline import align_fragments  # noqa: E402
 from services.synthetic.render import (  # noqa: E402
@@ -60,11 +69,17 @@ class LayoutClock:
 
 
 def run(
-    n_scenes: int, first_seed: int, outlines: list[FloatArray] | None = None
-) -> dict[str, float]:
-    """Local and global figures over ``n_scenes`` frame scenes from ``first_seed``."""
+    n_scenes: int,
+    first_seed: int,
+    outlines: list[FloatArray] | None = None,
+    params: PipelineParams = PipelineParams(),
+) -> dict[str, Any]:
+    """Local and global figures over ``n_scenes`` frame scenes from ``first_seed``;
+    ``"confidences"`` and ``"right"`` list each closed loop's confidence and verdict."""
     spec = FrameSpec()
     local, global_ok, rotation, translation, frames, statuses = [], [], [], [], [], []
+    confidences: list[float] = []
+    right: list[bool] = []
     clock = LayoutClock()
     for k in range(n_scenes):
         seed = first_seed + k
@@ -73,9 +88,12 @@ def run(
             scene = generate_frame_scene(spec, seed, outline)
         except RuntimeError:
             continue  # no station tiles this room within range
-        aligned = align_fragments({f.id: f.frame for f in scene.frames}, progress=clock)
+        aligned = align_fragments({f.id: f.frame for f in scene.frames}, params, clock)
         result = aligned.result.model_dump(mode="json")
         report = evaluate_result(result, frame_ground_truth_json(scene))
+        if result["confidence"] is not None:
+            confidences.append(float(result["confidence"]))
+            right.append(report.global_correct)
         local += list(report.local_correct.values())
         global_ok.append(report.global_correct)
         statuses.append(result["status"])
@@ -100,7 +118,28 @@ def run(
         "ms_per_frame_p90": ms_p90,
         "cpu_ms_per_frame": cpu_ms,
         "cpu_ms_per_frame_p90": cpu_ms_p90,
+        "confidences": confidences,
+        "right": right,
     }
+
+
+def fit_frame_calibration(
+    confidences: list[float], right: list[bool], closed: float
+) -> tuple[tuple[float, float], str]:
+    """The frames' map (bias, slope) of the confidence's logit, fitted on closed loops'
+    confidences (the map off) and verdicts, and a line on what it does to them."""
+    conf = np.clip(np.asarray(confidences), 1e-9, 1 - 1e-9)
+    logit = np.log(conf / (1 - conf))
+    ok = np.asarray(right, dtype=bool)
+    bias, slope = fit_logistic(np.column_stack([np.ones_like(logit), logit]), ok)
+    mapped = 1.0 / (1.0 + np.exp(-(bias + slope * logit)))
+    summary = (
+        f"{len(ok)} closed loops, {int(ok.sum())} right; at >= {closed}: before "
+        f"{int((conf >= closed).sum())} closed ({int(ok[conf >= closed].sum())} right), after "
+        f"{int((mapped >= closed).sum())} ({int(ok[mapped >= closed].sum())} right); Brier "
+        f"{float(np.mean((conf - ok) ** 2)):.3f} -> {float(np.mean((mapped - ok) ** 2)):.3f}"
+    )
+    return (round(float(bias), 3), round(float(slope), 3)), summary
 
 
 def _median_ms(values: list[float]) -> tuple[float, float]:
@@ -110,7 +149,7 @@ def _median_ms(values: list[float]) -> tuple[float, float]:
     return 1000 * statistics.median(values), 1000 * float(np.percentile(values, 90))
 
 
-def _row(name: str, r: dict[str, float]) -> str:
+def _row(name: str, r: dict[str, Any]) -> str:
     return (
         f"| {name} | {r['scenes']} | {r['frames']} | {100 * r['acc_local']:.1f} | "
         f"{100 * r['acc_global']:.1f} | {r['rotation_deg']:.2f} | {r['translation_pct']:.2f} | "
@@ -126,7 +165,11 @@ def main() -> None:
     parser.add_argument("--scenes", type=int, default=20)
     parser.add_argument("--seed", type=int, default=1000, help="first seed (unseen: >= 1000)")
     parser.add_argument("--shapes", action="store_true", help="also real room shapes")
+    parser.add_argument("--fit", action="store_true", help="fit the frames' calibration")
     args = parser.parse_args()
+    if args.fit:
+        _fit(args.scenes, args.seed, args.shapes)
+        return
     print(
         "| rooms | scenes | frames | ACC_local % | ACC_global % | rotation deg | "
         "translation % | said closed (right) | ambiguous | ms/frame median (p90) | "
@@ -134,16 +177,41 @@ def main() -> None:
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     print(_row("synthetic", run(args.scenes, args.seed)))
-    if args.shapes:
-        from bench.room_shapes import DEFAULT_PATH, load_room_shapes, split_houses
-
-        if DEFAULT_PATH.exists():
-            shapes = load_room_shapes(DEFAULT_PATH)
-            _, test = split_houses(house for house, _ in shapes)
-            # Rooms a few stations can see within the camera's range.
-            outlines = [p for h, p in shapes if h in test and float(np.ptp(p, axis=0).max()) <= 9.0]
-            print(_row("MatterportLayout shapes", run(args.scenes, args.seed, outlines)))
+    outlines = _outlines("test") if args.shapes else []
+    if outlines:
+        print(_row("MatterportLayout shapes", run(args.scenes, args.seed, outlines)))
     print("paper (RGB-D and clouds): ACC_global 85.1 %, rotation 8.79 deg, translation 9.15 %")
+
+
+def _outlines(split: str) -> list[FloatArray]:
+    """Real room outlines of one split (``"tune"`` or ``"test"``) that a few stations see
+    within the camera's range; none when the data file is missing."""
+    from bench.room_shapes import DEFAULT_PATH, load_room_shapes, split_houses
+
+    if not DEFAULT_PATH.exists():
+        return []
+    shapes = load_room_shapes(DEFAULT_PATH)
+    tune, test = split_houses(house for house, _ in shapes)
+    chosen = tune if split == "tune" else test
+    return [p for h, p in shapes if h in chosen and float(np.ptp(p, axis=0).max()) <= 9.0]
+
+
+def _fit(n_scenes: int, first_seed: int, shapes: bool) -> None:
+    """Fit and print the frames' calibration on synthetic (and tune-split shaped) rooms."""
+    params = PipelineParams()
+    off = params.model_copy(
+        update={"placement": params.placement.model_copy(update={"frame_calibration": (0, 1)})}
+    )
+    runs = [run(n_scenes, first_seed, params=off)]
+    outlines = _outlines("tune") if shapes else []
+    if outlines:
+        runs.append(run(n_scenes, first_seed, outlines, off))
+    confidences = [c for r in runs for c in r["confidences"]]
+    right = [ok for r in runs for ok in r["right"]]
+    coefficients, summary = fit_frame_calibration(
+        confidences, right, params.placement.closed_confidence
+    )
+    print(f"frame_calibration = {coefficients}: {summary}")
 
 
 if __name__ == "__main__":

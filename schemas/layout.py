@@ -29,3 +29,6 @@ class LocalLayoutWire(BaseModel):
     source_boundary: str = ""
     target_boundary: str = ""
     footprint: str = ""
+    from_frames: bool = Field(
+        False, description="estimated from RGB-D frames (their sites are calibrated apart)"
+    )

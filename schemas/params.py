@@ -182,6 +182,15 @@ class PlacementParams(_Frozen):
         "(bias, logit of its Boltzmann share, pieces, its closure term, its free-space "
         "conflict, its hidden corners, search truncated); (0, 1, 0, ...) is the share itself",
     )
+    frame_calibration: tuple[float, float] = Field(
+        (-1.061, 0.869),
+        min_length=2,
+        max_length=2,
+        description="(bias, slope) mapping the main room's calibrated logit z to a + b z when "
+        "its pieces are RGB-D frames (a share of the pieces: that share of the change): a "
+        "frame's chain is wrong more often than a cloud's (bench/rgbd_frames.py --fit, tune "
+        "seeds); (0, 1) leaves frames as clouds",
+    )
     closed_confidence: float = Field(
         0.95,
         gt=0,

@@ -64,6 +64,8 @@ class LocalLayout:
     boundary band of the cutting planes through the source and target.
     footprint: (F, 2) float64, aligned frame: centres of the coarse floor-plan cells the
     scan covers (where the scanner saw space); they must end up inside the room.
+    from_frames: True when estimated from RGB-D frames (a frame's chain is wrong more often
+    than a point cloud's, so a site's confidence is calibrated apart for them).
     """
 
     keypoints: FloatArray
@@ -71,6 +73,7 @@ class LocalLayout:
     source_boundary: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
     target_boundary: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
     footprint: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    from_frames: bool = False
 
     @property
     def ok(self) -> bool:

@@ -147,6 +147,7 @@ class Piece:
     footprint: (F, 2) float64, scanned floor-plan cells relative to the source.
     free: the seen open space, piece frame.
     ceiling: ceiling height above the floor, or None when the scan saw no ceiling.
+    from_frames: the chain was estimated from RGB-D frames.
     """
 
     id: str
@@ -157,6 +158,7 @@ class Piece:
     footprint: FloatArray
     free: FreeSpace
     ceiling: float | None = None
+    from_frames: bool = False
 
     @cached_property
     def turning(self) -> int:
@@ -208,6 +210,7 @@ def make_piece(fragment_id: str, layout: LocalLayout) -> Piece:
         footprint=footprint,
         free=_free_space(footprint, kp),
         ceiling=None if ceiling is None else float(ceiling - floor),
+        from_frames=layout.from_frames,
     )
 
 

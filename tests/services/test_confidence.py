@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -104,3 +105,33 @@ def test_a_placement_without_complete_candidates_has_no_assemblies():
     open_chain = PlacementCandidate(100.0, ("p0", "p1"), (0, 0), {}, missing=1)
     placement = Placement(open_chain, np.zeros((2, 2)), (), 1, True, False)
     assert rank_assemblies(pieces, placement, GEOMETRY) == []
+
+
+def _main_logit(pieces, placement, params, frames: int) -> float:
+    """Logit of the main room's probability when the first ``frames`` pieces are frames."""
+    mixed = [dataclasses.replace(p, from_frames=k < frames) for k, p in enumerate(pieces)]
+    probability = rank_assemblies(mixed, placement, params)[0].probability
+    return math.log(probability / (1.0 - probability))
+
+
+def test_frames_map_the_main_logit_in_their_share_of_the_pieces(l_room):
+    pieces, placement, _ = _ranked(l_room, [1.0, 9.5, 12.5, 20.0])
+    params = GEOMETRY.model_copy(update={"frame_calibration": (-1.0, 0.5)})
+    clouds = _main_logit(pieces, placement, params, 0)
+    assert _main_logit(pieces, placement, params, 4) == pytest.approx(-1.0 + 0.5 * clouds)
+    half = clouds + 0.5 * (-1.0 + (0.5 - 1.0) * clouds)
+    assert _main_logit(pieces, placement, params, 2) == pytest.approx(half)
+    identity = GEOMETRY.model_copy(update={"frame_calibration": (0.0, 1.0)})
+    assert _main_logit(pieces, placement, identity, 4) == pytest.approx(clouds)
+
+
+def test_a_frames_room_leaves_its_lost_probability_to_the_others(l_room):
+    pieces, placement, clouds = _ranked(l_room, [1.0, 9.5, 12.5, 20.0])
+    frames = [dataclasses.replace(p, from_frames=True) for p in pieces]
+    mapped = rank_assemblies(frames, placement, GEOMETRY)
+    assert mapped[0].probability < clouds[0].probability  # the default map: frames doubt more
+    assert [a.candidate for a in mapped] == [a.candidate for a in clouds]
+    # The other rooms keep their ratios and share what the main room lost.
+    ratio = mapped[1].probability / mapped[2].probability
+    assert ratio == pytest.approx(clouds[1].probability / clouds[2].probability)
+    assert sum(a.probability for a in mapped) < 1.0
