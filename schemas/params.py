@@ -183,7 +183,7 @@ class PlacementParams(_Frozen):
         "conflict, its hidden corners, search truncated); (0, 1, 0, ...) is the share itself",
     )
     frame_calibration: tuple[float, float] = Field(
-        (-1.061, 0.869),
+        (-0.999, 0.687),
         min_length=2,
         max_length=2,
         description="(bias, slope) mapping the main room's calibrated logit z to a + b z when "

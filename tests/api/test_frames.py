@@ -6,7 +6,15 @@ from __future__ import annotations
 
 import pytest
 
-from tests.frame_fixtures import frame_files, frame_zip, raw_zip, three_frames, zip_bomb, zip_files
+from tests.frame_fixtures import (
+    CLOSING_SEED,
+    frame_files,
+    frame_zip,
+    raw_zip,
+    three_frames,
+    zip_bomb,
+    zip_files,
+)
 from tests.service_fixtures import ApiServer, redis_snapshot, wait_result
 
 pytestmark = pytest.mark.timeout(120)
@@ -50,7 +58,7 @@ def test_bad_frames_over_http_get_their_code_and_store_nothing(
 
 
 def test_three_zipped_frames_close_the_site(server: ApiServer) -> None:
-    scene = three_frames(0)
+    scene = three_frames(CLOSING_SEED)
     with server.client() as http:
         for f in scene.frames:
             reply = http.put(

@@ -12,7 +12,7 @@ import pytest
 from cli.frames import dataset_frames, is_dataset
 from schemas.params import PipelineParams
 from services.rgbd import RgbdFrame
-from tests.frame_fixtures import frame_files, frame_zip, three_frames
+from tests.frame_fixtures import CLOSING_SEED, frame_files, frame_zip, three_frames
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -34,7 +34,7 @@ def _align(*args: str) -> subprocess.CompletedProcess[str]:
 
 
 def test_align_reads_frame_folders_and_zips_and_reports_bad_ones(tmp_path: Path) -> None:
-    scene = three_frames(0)
+    scene = three_frames(CLOSING_SEED)
     first, second, third = scene.frames
     _write_folder(tmp_path / "in" / first.id, frame_files(first.frame))
     (tmp_path / "in" / f"{second.id}.zip").write_bytes(frame_zip(second.frame))
