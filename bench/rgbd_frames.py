@@ -38,7 +38,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run as a script, the repository's packages are importable
 
-from bench.tune_placement import fit_logistic  # noqa: E402
+from bench.scoring import fit_logit_map  # noqa: E402
 from schemas.params import PipelineParams  # noqa: E402
 from services.evaluation import evaluate_result  # noqa: E402
 from services.pipeline import align_fragments  # noqa: E402
@@ -123,25 +123,6 @@ def run(
     }
 
 
-def fit_frame_calibration(
-    confidences: list[float], right: list[bool], closed: float
-) -> tuple[tuple[float, float], str]:
-    """The frames' map (bias, slope) of the confidence's logit, fitted on closed loops'
-    confidences (the map off) and verdicts, and a line on what it does to them."""
-    conf = np.clip(np.asarray(confidences), 1e-9, 1 - 1e-9)
-    logit = np.log(conf / (1 - conf))
-    ok = np.asarray(right, dtype=bool)
-    bias, slope = fit_logistic(np.column_stack([np.ones_like(logit), logit]), ok)
-    mapped = 1.0 / (1.0 + np.exp(-(bias + slope * logit)))
-    summary = (
-        f"{len(ok)} closed loops, {int(ok.sum())} right; at >= {closed}: before "
-        f"{int((conf >= closed).sum())} closed ({int(ok[conf >= closed].sum())} right), after "
-        f"{int((mapped >= closed).sum())} ({int(ok[mapped >= closed].sum())} right); Brier "
-        f"{float(np.mean((conf - ok) ** 2)):.3f} -> {float(np.mean((mapped - ok) ** 2)):.3f}"
-    )
-    return (round(float(bias), 3), round(float(slope), 3)), summary
-
-
 def _median_ms(values: list[float]) -> tuple[float, float]:
     """Median and 90th percentile of ``values`` (seconds), in milliseconds."""
     if not values:
@@ -208,9 +189,7 @@ def _fit(n_scenes: int, first_seed: int, shapes: bool) -> None:
         runs.append(run(n_scenes, first_seed, outlines, off))
     confidences = [c for r in runs for c in r["confidences"]]
     right = [ok for r in runs for ok in r["right"]]
-    coefficients, summary = fit_frame_calibration(
-        confidences, right, params.placement.closed_confidence
-    )
+    coefficients, summary = fit_logit_map(confidences, right, params.placement.closed_confidence)
     print(f"frame_calibration = {coefficients}: {summary}")
 
 

@@ -1,5 +1,6 @@
 """Scoring helpers shared by the placement benchmarks: the true assembly of a scene, a
-candidate assembly as a result, and a result's alternatives as results of their own."""
+candidate assembly as a result, a result's alternatives as results of their own, and the
+map of the confidence's logit fitted for one kind of evidence."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+from scipy.optimize import minimize
 
 from schemas.params import PlacementParams
 from services.layout_model import build_polygon
@@ -17,7 +19,13 @@ from services.placement.priors import chain_placement
 from services.refinement import refine_translations
 from services.types import LocalLayout
 
-__all__ = ["alternative_results", "candidate_result", "true_assembly"]
+__all__ = [
+    "alternative_results",
+    "candidate_result",
+    "fit_logistic",
+    "fit_logit_map",
+    "true_assembly",
+]
 
 
 def true_assembly(
@@ -79,3 +87,41 @@ def alternative_results(result: Mapping[str, Any]) -> list[dict[str, Any]]:
         ]
         out.append({"fragments": fragments, "floorplan": alternative["floorplan"]})
     return out
+
+
+def fit_logit_map(
+    confidences: Sequence[float], right: Sequence[bool], closed: float
+) -> tuple[tuple[float, float], str]:
+    """A map (bias, slope) of the confidence's logit for one kind of evidence
+    (``PlacementParams.frame_calibration``, ``thin_cloud_calibration``): logistic regression
+    of the verdicts on the logits of confidences computed with the map off. Returns it and a
+    line on what it does to those results at the ``closed`` threshold."""
+    conf = np.clip(np.asarray(confidences, dtype=np.float64), 1e-9, 1 - 1e-9)
+    logit = np.log(conf / (1 - conf))
+    ok = np.asarray(right, dtype=bool)
+    bias, slope = fit_logistic(np.column_stack([np.ones_like(logit), logit]), ok)
+    mapped = 1.0 / (1.0 + np.exp(-(bias + slope * logit)))
+    summary = (
+        f"{len(ok)} closed loops, {int(ok.sum())} right; at >= {closed}: before "
+        f"{int((conf >= closed).sum())} closed ({int(ok[conf >= closed].sum())} right), after "
+        f"{int((mapped >= closed).sum())} ({int(ok[mapped >= closed].sum())} right); Brier "
+        f"{float(np.mean((conf - ok) ** 2)):.3f} -> {float(np.mean((mapped - ok) ** 2)):.3f}"
+    )
+    return (round(float(bias), 3), round(float(slope), 3)), summary
+
+
+def fit_logistic(inputs: np.ndarray, right: np.ndarray, ridge: float = 0.1) -> np.ndarray:
+    """Coefficients of P(right) = sigmoid(c . inputs), maximum likelihood with a ridge
+    (the bias is not penalised)."""
+    penalty = np.ones(inputs.shape[1])
+    penalty[0] = 0.0
+
+    def loss(c: np.ndarray) -> tuple[float, np.ndarray]:
+        z = inputs @ c
+        p = 1.0 / (1.0 + np.exp(-z))
+        nll = float(np.sum(np.logaddexp(0.0, z) - right * z)) + ridge * float(penalty @ c**2)
+        return nll, inputs.T @ (p - right) + 2 * ridge * penalty * c
+
+    start = np.zeros(inputs.shape[1])
+    start[1] = 1.0
+    return np.asarray(minimize(loss, start, jac=True, method="L-BFGS-B").x)

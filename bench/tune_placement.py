@@ -30,7 +30,7 @@ from rich.console import Console
 from scipy.optimize import minimize
 from scipy.special import logsumexp
 
-from bench.scoring import candidate_result, true_assembly
+from bench.scoring import candidate_result, fit_logistic, true_assembly
 from bench.world_scenes import (
     BUCKETS,
     DEFAULT_CACHE,
@@ -189,23 +189,6 @@ def main_rooms(
         )
         right.append(bool(scene.right[first]))
     return np.array(inputs), np.array(right)
-
-
-def fit_logistic(inputs: np.ndarray, right: np.ndarray, ridge: float = 0.1) -> np.ndarray:
-    """Coefficients of P(right) = sigmoid(c . inputs), maximum likelihood with a ridge
-    (the bias is not penalised)."""
-    penalty = np.ones(inputs.shape[1])
-    penalty[0] = 0.0
-
-    def loss(c: np.ndarray) -> tuple[float, np.ndarray]:
-        z = inputs @ c
-        p = 1.0 / (1.0 + np.exp(-z))
-        nll = float(np.sum(np.logaddexp(0.0, z) - right * z)) + ridge * float(penalty @ c**2)
-        return nll, inputs.T @ (p - right) + 2 * ridge * penalty * c
-
-    start = np.zeros(inputs.shape[1])
-    start[1] = 1.0
-    return np.asarray(minimize(loss, start, jac=True, method="L-BFGS-B").x)
 
 
 def cross_validated(inputs: np.ndarray, right: np.ndarray, folds: int = 5) -> np.ndarray:

@@ -29,6 +29,8 @@ class LocalLayoutWire(BaseModel):
     source_boundary: str = ""
     target_boundary: str = ""
     footprint: str = ""
-    from_frames: bool = Field(
-        False, description="estimated from RGB-D frames (their sites are calibrated apart)"
+    evidence: Literal["cloud", "thin_cloud", "frame"] = Field(
+        "cloud",
+        description="what the chain rests on: a cloud, a cloud thinner than the confidence's "
+        "calibration saw, or RGB-D frames (the last two calibrated apart)",
     )

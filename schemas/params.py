@@ -65,6 +65,13 @@ class LayoutParams(_Frozen):
         1.0, gt=0, description="and how far past the chain's end (what the scan saw there), m"
     )
     min_wall_cells: int = Field(3, ge=1, description="shortest candidate wall segment, cells")
+    min_calibrated_points: int = Field(
+        15_000,
+        ge=0,
+        description="a cloud of fewer points is thinner than any the confidence was fitted on "
+        "(30 000 and more; at 8 000-15 000 a chain is wrong about twice as often): its room "
+        "is calibrated apart (placement.thin_cloud_calibration)",
+    )
     frame: FrameParams = Field(
         default_factory=FrameParams,
         description="RGB-D frames: depth range, pixel stride, merging of overlapping frames",
@@ -190,6 +197,13 @@ class PlacementParams(_Frozen):
         "its pieces are RGB-D frames (a share of the pieces: that share of the change): a "
         "frame's chain is wrong more often than a cloud's (bench/rgbd_frames.py --fit, tune "
         "seeds); (0, 1) leaves frames as clouds",
+    )
+    thin_cloud_calibration: tuple[float, float] = Field(
+        (-0.62, 0.674),
+        min_length=2,
+        max_length=2,
+        description="the same map for clouds thinner than layout.min_calibrated_points "
+        "(bench/sensor_stress.py --fit, tune seeds)",
     )
     closed_confidence: float = Field(
         0.95,

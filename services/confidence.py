@@ -10,10 +10,11 @@ wrong local layout, an assembly beyond the node budget).
 The shares rank the rooms; how far to trust the first one also depends on what they do not
 see (how many pieces, how well the loop closes, whether the search finished), so the main
 room's probability is a logistic function of its share and of those, fitted on the
-benchmark's tune split. RGB-D frames' chains are wrong more often than point clouds' (about
-one in four against one in thirteen), which no placement term sees, so rooms of frames get
-a second, linear map of that logit fitted on the frames benchmark's tune seeds. The other
-rooms share what is left in proportion to their shares.
+benchmark's tune split. Chains resting on less evidence than those clouds had (RGB-D frames:
+wrong about one in four against one in thirteen; clouds of under 15 000 points) fail in
+ways no placement term sees, so rooms of them get a second, linear map of that logit,
+fitted on the frames benchmark's tune seeds. The other rooms share what is left in
+proportion to their shares.
 """
 
 from __future__ import annotations
@@ -143,8 +144,7 @@ def rank_assemblies(
     main = order[0]
     inputs = calibration_features(float(shares[main]), firsts[main], free, not placement.exhaustive)
     z = float(np.asarray(params.confidence_coefficients) @ inputs)
-    bias, slope = params.frame_calibration
-    z += sum(p.from_frames for p in pieces) / len(pieces) * (bias + (slope - 1.0) * z)
+    z += _evidence_shift(pieces, z, params)
     confidence = 1.0 / (1.0 + math.exp(-z))
     rest = max(1.0 - float(shares[main]), 1e-12)
     return [
@@ -158,6 +158,17 @@ def rank_assemblies(
         )
         for g in order
     ]
+
+
+def _evidence_shift(pieces: Sequence[Piece], z: float, params: PlacementParams) -> float:
+    """The change of the main room's logit ``z`` for pieces resting on less than the
+    calibration's clouds: each kind's map a + b z, in the share of the pieces of that kind."""
+    maps = {"frame": params.frame_calibration, "thin_cloud": params.thin_cloud_calibration}
+    shift = 0.0
+    for kind, (bias, slope) in maps.items():
+        share = sum(p.evidence == kind for p in pieces) / len(pieces)
+        shift += share * (bias + (slope - 1.0) * z)
+    return shift
 
 
 def fragment_confidences(

@@ -341,7 +341,7 @@ def estimate_frame_layout(
     if chain is None or len(chain.keypoints) < 2:
         report("done", 1.0)
         return LocalLayout(
-            keypoints=np.zeros((0, 2)), frame=frame, footprint=footprint, from_frames=True
+            keypoints=np.zeros((0, 2)), frame=frame, footprint=footprint, evidence="frame"
         )
     kp = _flatten_furniture(_flatten_corner_fronts(chain.keypoints))
     kp = _to_frustum_edges(kp, lines, views)
@@ -353,7 +353,7 @@ def estimate_frame_layout(
         source_boundary=boundary_points(aligned, kp[0], _unit(kp[1] - kp[0]), band, depth),
         target_boundary=boundary_points(aligned, kp[-1], _unit(kp[-2] - kp[-1]), band, depth),
         footprint=footprint,
-        from_frames=True,
+        evidence="frame",
     )
 
 

@@ -6,7 +6,7 @@ import numpy as np
 
 from schemas.params import PipelineParams
 from services.manhattan import estimate_manhattan_frame, thin_with_normals
-from services.types import FloatArray, LocalLayout, ProgressFn
+from services.types import Evidence, FloatArray, LocalLayout, ProgressFn
 from services.wall_graph import find_wall_chain
 from services.wall_lines import find_wall_lines
 
@@ -84,10 +84,14 @@ def estimate_local_layout(
     -------
     LocalLayout
         Keypoints in the aligned frame (empty when no wall was found), the Manhattan frame
-        and the boundary points at both chain ends.
+        and the boundary points at both chain ends; evidence ``"thin_cloud"`` for a cloud
+        of fewer than ``layout.min_calibrated_points`` points.
     """
     report = progress or (lambda stage, fraction: None)
     report("manhattan", 0.0)
+    evidence: Evidence = (
+        "thin_cloud" if len(points) < params.layout.min_calibrated_points else "cloud"
+    )
     cloud = thin_with_normals(points, params.manhattan)
     frame = estimate_manhattan_frame(cloud, params.manhattan)
     aligned = cloud.points @ frame.rotation.T
@@ -99,7 +103,10 @@ def estimate_local_layout(
     if chain is None or len(chain.keypoints) < 2:
         report("done", 1.0)
         return LocalLayout(
-            keypoints=np.zeros((0, 2)), frame=frame, footprint=footprint_cells(aligned)
+            keypoints=np.zeros((0, 2)),
+            frame=frame,
+            footprint=footprint_cells(aligned),
+            evidence=evidence,
         )
     kp = chain.keypoints
     band, depth = params.layout.end_region_beyond, params.layout.end_region_depth
@@ -109,6 +116,7 @@ def estimate_local_layout(
         source_boundary=boundary_points(aligned, kp[0], _unit(kp[1] - kp[0]), band, depth),
         target_boundary=boundary_points(aligned, kp[-1], _unit(kp[-2] - kp[-1]), band, depth),
         footprint=footprint_cells(aligned),
+        evidence=evidence,
     )
     report("done", 1.0)
     return layout

@@ -8,11 +8,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 __all__ = [
+    "Evidence",
     "FloatArray",
     "LocalLayout",
     "ManhattanFrame",
@@ -22,6 +24,7 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 ProgressFn = Callable[[str, float], None]  # (stage, fraction done) for long work
+Evidence = Literal["cloud", "thin_cloud", "frame"]  # what a local layout rests on
 
 
 @dataclass(frozen=True)
@@ -64,8 +67,9 @@ class LocalLayout:
     boundary band of the cutting planes through the source and target.
     footprint: (F, 2) float64, aligned frame: centres of the coarse floor-plan cells the
     scan covers (where the scanner saw space); they must end up inside the room.
-    from_frames: True when estimated from RGB-D frames (a frame's chain is wrong more often
-    than a point cloud's, so a site's confidence is calibrated apart for them).
+    evidence: what the chain rests on: ``"cloud"``, ``"thin_cloud"`` (fewer points than any
+    cloud the confidence was fitted on) or ``"frame"`` (RGB-D frames). The last two are
+    wrong more often in ways no placement term sees, so rooms of them are calibrated apart.
     """
 
     keypoints: FloatArray
@@ -73,7 +77,7 @@ class LocalLayout:
     source_boundary: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
     target_boundary: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
     footprint: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
-    from_frames: bool = False
+    evidence: Evidence = "cloud"
 
     @property
     def ok(self) -> bool:

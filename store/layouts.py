@@ -38,7 +38,7 @@ def layout_to_wire(layout: LocalLayout) -> LocalLayoutWire:
         source_boundary=encode_array(layout.source_boundary),
         target_boundary=encode_array(layout.target_boundary),
         footprint=encode_array(layout.footprint),
-        from_frames=layout.from_frames,
+        evidence=layout.evidence,
     )
 
 
@@ -56,5 +56,5 @@ def layout_from_wire(wire: LocalLayoutWire) -> LocalLayout:
         source_boundary=decode_array(wire.source_boundary, 3),
         target_boundary=decode_array(wire.target_boundary, 3),
         footprint=decode_array(wire.footprint, 2),
-        from_frames=wire.from_frames,
+        evidence=wire.evidence,
     )

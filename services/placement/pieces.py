@@ -13,7 +13,7 @@ from functools import cached_property
 import numpy as np
 from scipy.ndimage import binary_erosion
 
-from services.types import FloatArray, LocalLayout
+from services.types import Evidence, FloatArray, LocalLayout
 
 __all__ = [
     "SAMPLE_SPACING",
@@ -147,7 +147,7 @@ class Piece:
     footprint: (F, 2) float64, scanned floor-plan cells relative to the source.
     free: the seen open space, piece frame.
     ceiling: ceiling height above the floor, or None when the scan saw no ceiling.
-    from_frames: the chain was estimated from RGB-D frames.
+    evidence: what the chain rests on (see LocalLayout).
     """
 
     id: str
@@ -158,7 +158,7 @@ class Piece:
     footprint: FloatArray
     free: FreeSpace
     ceiling: float | None = None
-    from_frames: bool = False
+    evidence: Evidence = "cloud"
 
     @cached_property
     def turning(self) -> int:
@@ -210,7 +210,7 @@ def make_piece(fragment_id: str, layout: LocalLayout) -> Piece:
         footprint=footprint,
         free=_free_space(footprint, kp),
         ceiling=None if ceiling is None else float(ceiling - floor),
-        from_frames=layout.from_frames,
+        evidence=layout.evidence,
     )
 
 

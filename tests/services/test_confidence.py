@@ -109,7 +109,10 @@ def test_a_placement_without_complete_candidates_has_no_assemblies():
 
 def _main_logit(pieces, placement, params, frames: int) -> float:
     """Logit of the main room's probability when the first ``frames`` pieces are frames."""
-    mixed = [dataclasses.replace(p, from_frames=k < frames) for k, p in enumerate(pieces)]
+    mixed = [
+        dataclasses.replace(p, evidence="frame" if k < frames else "cloud")
+        for k, p in enumerate(pieces)
+    ]
     probability = rank_assemblies(mixed, placement, params)[0].probability
     return math.log(probability / (1.0 - probability))
 
@@ -127,7 +130,7 @@ def test_frames_map_the_main_logit_in_their_share_of_the_pieces(l_room):
 
 def test_a_frames_room_leaves_its_lost_probability_to_the_others(l_room):
     pieces, placement, clouds = _ranked(l_room, [1.0, 9.5, 12.5, 20.0])
-    frames = [dataclasses.replace(p, from_frames=True) for p in pieces]
+    frames = [dataclasses.replace(p, evidence="frame") for p in pieces]
     mapped = rank_assemblies(frames, placement, GEOMETRY)
     assert mapped[0].probability < clouds[0].probability  # the default map: frames doubt more
     assert [a.candidate for a in mapped] == [a.candidate for a in clouds]
@@ -135,3 +138,16 @@ def test_a_frames_room_leaves_its_lost_probability_to_the_others(l_room):
     ratio = mapped[1].probability / mapped[2].probability
     assert ratio == pytest.approx(clouds[1].probability / clouds[2].probability)
     assert sum(a.probability for a in mapped) < 1.0
+
+
+def test_each_kind_of_evidence_has_its_own_map(l_room):
+    pieces, placement, _ = _ranked(l_room, [1.0, 9.5, 12.5, 20.0])
+    params = GEOMETRY.model_copy(
+        update={"frame_calibration": (-1.0, 0.5), "thin_cloud_calibration": (-2.0, 1.0)}
+    )
+    clouds = _main_logit(pieces, placement, params, 0)
+    kinds = ["frame", "thin_cloud", "cloud", "cloud"]
+    mixed = [dataclasses.replace(p, evidence=kind) for p, kind in zip(pieces, kinds, strict=True)]
+    probability = rank_assemblies(mixed, placement, params)[0].probability
+    expected = clouds + 0.25 * (-1.0 - 0.5 * clouds) + 0.25 * (-2.0)
+    assert math.log(probability / (1.0 - probability)) == pytest.approx(expected)

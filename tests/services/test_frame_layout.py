@@ -23,7 +23,7 @@ def test_frames_layouts_match_the_truth_and_their_up_axis_is_minus_y() -> None:
     scene = three_frames(0)
     for f in scene.frames:
         layout = estimate_rgbd_layout(f.frame)
-        assert layout.ok and layout.from_frames  # its site's confidence is calibrated apart
+        assert layout.ok and layout.evidence == "frame"  # its room is calibrated apart
         # Up in the optical frame is about -y; the rotation maps optical -> aligned.
         up = layout.frame.rotation[2]
         truth_up = f.pose[:3, :3].T @ np.array([0.0, 0.0, 1.0])

@@ -88,3 +88,12 @@ def test_footprint_ignores_isolated_outliers():
     outliers = np.array([[10.0, 10.0, 0.0], [-7.0, 3.0, 0.0]])
     cells = footprint_cells(np.vstack([dense, outliers]))
     assert np.all(cells < 1.5) and np.all(cells > -0.5)
+
+
+def test_a_cloud_thinner_than_the_calibrations_is_a_thin_cloud():
+    points = small_scene("easy", 0).fragments[0].points  # 30 000 or more
+    assert estimate_local_layout(points).evidence == "cloud"
+    thin = points[:: int(np.ceil(len(points) / 10_000))]
+    assert estimate_local_layout(thin).evidence == "thin_cloud"
+    trusting = PipelineParams(layout=LayoutParams(min_calibrated_points=0))
+    assert estimate_local_layout(thin, trusting).evidence == "cloud"

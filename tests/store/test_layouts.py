@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from schemas.layout import LocalLayoutWire
+from services.types import Evidence
 from store.layouts import layout_from_wire, layout_to_wire
 from tests.conftest import scene_layouts, small_scene
 
@@ -25,18 +26,18 @@ def test_layout_survives_the_wire_format():
     assert np.array_equal(back.frame.rotation, layout.frame.rotation)
 
 
-@pytest.mark.parametrize("from_frames", [False, True])
-def test_whether_a_layout_came_from_frames_survives_the_wire(from_frames: bool) -> None:
+@pytest.mark.parametrize("evidence", ["cloud", "thin_cloud", "frame"])
+def test_what_a_layout_rests_on_survives_the_wire(evidence: Evidence) -> None:
     layout = dataclasses.replace(
-        scene_layouts()[small_scene("easy", 0).fragments[0].id], from_frames=from_frames
+        scene_layouts()[small_scene("easy", 0).fragments[0].id], evidence=evidence
     )
     wire = LocalLayoutWire.model_validate_json(layout_to_wire(layout).model_dump_json())
-    assert layout_from_wire(wire).from_frames is from_frames
+    assert layout_from_wire(wire).evidence == evidence
 
 
-def test_a_stored_layout_without_the_frames_flag_is_a_clouds():
-    # Layouts stored before the flag existed were all estimated from point clouds.
+def test_a_stored_layout_without_its_evidence_is_a_clouds():
+    # Layouts stored before the field existed were all estimated from point clouds.
     layout = scene_layouts()[small_scene("easy", 0).fragments[0].id]
     old = layout_to_wire(layout).model_dump(mode="json")
-    del old["from_frames"]
-    assert layout_from_wire(LocalLayoutWire.model_validate(old)).from_frames is False
+    del old["evidence"]
+    assert layout_from_wire(LocalLayoutWire.model_validate(old)).evidence == "cloud"
