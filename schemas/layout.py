@@ -9,7 +9,9 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-__all__ = ["LocalLayoutWire"]
+__all__ = ["Evidence", "LocalLayoutWire"]
+
+Evidence = Literal["cloud", "thin_cloud", "frame"]  # what a local layout rests on
 
 
 class LocalLayoutWire(BaseModel):
@@ -29,7 +31,7 @@ class LocalLayoutWire(BaseModel):
     source_boundary: str = ""
     target_boundary: str = ""
     footprint: str = ""
-    evidence: Literal["cloud", "thin_cloud", "frame"] = Field(
+    evidence: Evidence = Field(
         "cloud",
         description="what the chain rests on: a cloud, a cloud thinner than the confidence's "
         "calibration saw, or RGB-D frames (the last two calibrated apart)",

@@ -12,9 +12,9 @@ see (how many pieces, how well the loop closes, whether the search finished), so
 room's probability is a logistic function of its share and of those, fitted on the
 benchmark's tune split. Chains resting on less evidence than those clouds had (RGB-D frames:
 wrong about one in four against one in thirteen; clouds of under 15 000 points) fail in
-ways no placement term sees, so rooms of them get a second, linear map of that logit,
-fitted on the frames benchmark's tune seeds. The other rooms share what is left in
-proportion to their shares.
+ways no placement term sees, so rooms of them get a second, linear map of that logit per
+kind, fitted on tune seeds of the frames and the other-scanners benchmarks. The other rooms
+share what is left in proportion to their shares.
 """
 
 from __future__ import annotations
@@ -117,8 +117,9 @@ def rank_assemblies(
     ----------
     pieces : the pieces the placement was searched over.
     placement : a closed placement (its candidates place every piece).
-    params : same-room share, 'none of these' energy, calibration coefficients (and the
-        frames' map of the logit, in the share of pieces that are frames).
+    params : same-room share, 'none of these' energy, calibration coefficients, and the
+        maps of the logit for frames and thin clouds (each in the share of pieces of its
+        kind).
     known : pieces whose place a prior pose tells. The 'none of these' share and the
         calibration grow with the pieces the search had to place itself (fitted without
         hints); a piece the fleet already placed is not one of those.

@@ -8,10 +8,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
+
+from schemas.layout import Evidence
 
 __all__ = [
     "Evidence",
@@ -24,7 +25,6 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 ProgressFn = Callable[[str, float], None]  # (stage, fraction done) for long work
-Evidence = Literal["cloud", "thin_cloud", "frame"]  # what a local layout rests on
 
 
 @dataclass(frozen=True)
