@@ -399,6 +399,9 @@ def place_site(
     height = _room_height([layouts[fid] for fid in usable])
     contradicted = _contradicted_hints(main, site_hints, layouts)
     diagnostics = _diagnostics(placement, main, assemblies, contradicted)
+    # What the chains rest on: frames and thin clouds lower the confidence (its maps per kind).
+    kinds = [layouts[fid].evidence for fid in usable]
+    diagnostics["evidence"] = {kind: kinds.count(kind) for kind in sorted(set(kinds))}
     if status == "open" and main.polygon is not None:
         diagnostics["unconfirmed_polygon"] = main.polygon.tolist()
     if main.polygon is not None and not main.rectilinear:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import get_args
 
@@ -46,6 +47,19 @@ def test_easy_scene_closes_with_accurate_poses():
     polygon = np.array(result.floorplan.rooms[0].polygon)
     x, y = polygon[:, 0], polygon[:, 1]
     assert 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y) > 0  # counter-clockwise
+    assert result.diagnostics["evidence"] == {"cloud": len(scene.fragments)}
+
+
+def test_diagnostics_count_what_the_chains_rest_on():
+    layouts = scene_layouts("easy", 2, 40_000)
+    first, *rest = layouts
+    layouts[first] = dataclasses.replace(layouts[first], evidence="thin_cloud")
+    mixed = place_site(layouts)
+    assert mixed.diagnostics["evidence"] == {"cloud": len(rest), "thin_cloud": 1}
+    # A thin cloud's chain is doubted more: the same room, less sure.
+    plain = place_site(scene_layouts("easy", 2, 40_000))
+    assert mixed.confidence is not None and plain.confidence is not None
+    assert mixed.confidence < plain.confidence
 
 
 def test_the_same_fragments_in_another_order_give_the_same_result():
