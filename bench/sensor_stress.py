@@ -8,7 +8,8 @@ confidence.
 
 - ``noisy``: depth noise 3-5 cm, 5 % outliers, tilt up to 6 degrees (the preset: 0.5-3
   cm, 2 %, 4 degrees);
-- ``sparse``: 8 000-15 000 points per fragment (the preset: 30 000 and more);
+- ``sparse``: 8 000-15 000 points per fragment (the preset: 30 000 and more, scaled down
+  to 19 000 at 16 fragments);
 - ``vsparse``: 4 000-8 000 points.
 
 Clouds under ``LayoutParams.min_calibrated_points`` are "thin": their rooms get the map of

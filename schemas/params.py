@@ -69,7 +69,7 @@ class LayoutParams(_Frozen):
         15_000,
         ge=0,
         description="a cloud of fewer points is thinner than any the confidence was fitted on "
-        "(30 000 and more; at 8 000-15 000 a chain is wrong about twice as often): its room "
+        "(19 000 and more; at 8 000-15 000 a chain is wrong about twice as often): its room "
         "is calibrated apart (placement.thin_cloud_calibration)",
     )
     frame: FrameParams = Field(
