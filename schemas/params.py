@@ -191,8 +191,6 @@ class PlacementParams(_Frozen):
     )
     frame_calibration: tuple[float, float] = Field(
         (-0.999, 0.687),
-        min_length=2,
-        max_length=2,
         description="(bias, slope) mapping the main room's calibrated logit z to a + b z when "
         "its pieces are RGB-D frames (a share of the pieces: that share of the change): a "
         "frame's chain is wrong more often than a cloud's (bench/rgbd_frames.py --fit, tune "
@@ -200,8 +198,6 @@ class PlacementParams(_Frozen):
     )
     thin_cloud_calibration: tuple[float, float] = Field(
         (-0.62, 0.674),
-        min_length=2,
-        max_length=2,
         description="the same map for clouds thinner than layout.min_calibrated_points "
         "(bench/sensor_stress.py --fit, tune seeds)",
     )
