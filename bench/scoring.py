@@ -12,6 +12,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from schemas.params import PlacementParams
+from services.evaluation import evaluate_result
 from services.layout_model import build_polygon
 from services.pipeline import fragment_pose
 from services.placement import Piece, PlacementCandidate, translations_of
@@ -24,6 +25,7 @@ __all__ = [
     "candidate_result",
     "fit_logistic",
     "fit_logit_map",
+    "main_room_verdict",
     "true_assembly",
 ]
 
@@ -89,20 +91,40 @@ def alternative_results(result: Mapping[str, Any]) -> list[dict[str, Any]]:
     return out
 
 
+def main_room_verdict(
+    result: Mapping[str, Any], truth: Mapping[str, Any]
+) -> tuple[float, bool] | None:
+    """(confidence, right) of a result's main room, None when its loop did not close.
+
+    What a confidence map is fitted on: every result with a main assembly, whatever its
+    status. A lone room the confidence doubts is reported 'open' without a floorplan (the
+    contract wants a runner-up for 'ambiguous'), so it is judged by the loop it kept in
+    ``diagnostics.unconfirmed_polygon``.
+    """
+    if result["status"] in ("closed", "ambiguous"):
+        return float(result["confidence"]), evaluate_result(result, truth).global_correct
+    polygon = result.get("diagnostics", {}).get("unconfirmed_polygon")
+    if result["status"] != "open" or polygon is None:
+        return None
+    kept = {**result, "floorplan": {"rooms": [{"polygon": polygon}]}}
+    return float(result["confidence"]), evaluate_result(kept, truth).global_correct
+
+
 def fit_logit_map(
     confidences: Sequence[float], right: Sequence[bool], closed: float
 ) -> tuple[tuple[float, float], str]:
     """A map (bias, slope) of the confidence's logit for one kind of evidence
     (``PlacementParams.frame_calibration``, ``thin_cloud_calibration``): logistic regression
-    of the verdicts on the logits of confidences computed with the map off. Returns it and a
-    line on what it does to those results at the ``closed`` threshold."""
+    of the main rooms' verdicts on the logits of their confidences, computed with the map off
+    (:func:`main_room_verdict`). Returns it and a line on what it does to those rooms at the
+    ``closed`` threshold."""
     conf = np.clip(np.asarray(confidences, dtype=np.float64), 1e-9, 1 - 1e-9)
     logit = np.log(conf / (1 - conf))
     ok = np.asarray(right, dtype=bool)
     bias, slope = fit_logistic(np.column_stack([np.ones_like(logit), logit]), ok)
     mapped = 1.0 / (1.0 + np.exp(-(bias + slope * logit)))
     summary = (
-        f"{len(ok)} closed loops, {int(ok.sum())} right; at >= {closed}: before "
+        f"{len(ok)} main rooms, {int(ok.sum())} right; at >= {closed}: before "
         f"{int((conf >= closed).sum())} closed ({int(ok[conf >= closed].sum())} right), after "
         f"{int((mapped >= closed).sum())} ({int(ok[mapped >= closed].sum())} right); Brier "
         f"{float(np.mean((conf - ok) ** 2)):.3f} -> {float(np.mean((mapped - ok) ** 2)):.3f}"

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.scoring import fit_logit_map
+from bench.scoring import fit_logit_map, main_room_verdict
 from schemas.params import PipelineParams
 from services.evaluation import evaluate_result
 from services.pipeline import estimate_layout, place_site
@@ -48,7 +48,8 @@ _SEED_STRIDE = 100  # seeds of one bucket: first + stride * bucket index + k
 def run(
     variant: str, per_bucket: int, first_seed: int, params: PipelineParams = PipelineParams()
 ) -> list[dict[str, Any]]:
-    """One record per scene: bucket, status, confidence (None when open), right."""
+    """One record per scene: bucket, status, right (the result as reported), main (its main
+    room's confidence and verdict, :func:`bench.scoring.main_room_verdict`)."""
     records = []
     for b, (lo, hi) in enumerate(BUCKETS):
         spec = dataclasses.replace(
@@ -58,13 +59,15 @@ def run(
             scene = generate_scene(spec, first_seed + _SEED_STRIDE * b + k)
             layouts = {f.id: estimate_layout(f.points, params) for f in scene.fragments}
             result = place_site(layouts, params).model_dump(mode="json")
-            report = evaluate_result(result, ground_truth_json(scene))
+            truth = ground_truth_json(scene)
+            verdict = main_room_verdict(result, truth)
             records.append(
                 {
                     "bucket": f"{lo}-{hi}",
                     "status": result["status"],
-                    "confidence": result["confidence"] if result["status"] != "open" else None,
-                    "right": report.global_correct,
+                    "right": evaluate_result(result, truth).global_correct,
+                    # The main room's confidence and verdict (None: the loop did not close).
+                    "main": verdict,
                 }
             )
     return records
@@ -74,7 +77,7 @@ def _row(variant: str, bucket: str, records: list[dict[str, Any]]) -> str:
     right = np.array([r["right"] for r in records], dtype=bool)
     statuses = [r["status"] for r in records]
     closed = np.array([s == "closed" for s in statuses])
-    conf = np.array([r["confidence"] or 0.0 for r in records])
+    conf = np.array([r["main"][0] if r["main"] and r["status"] != "open" else 0.0 for r in records])
     return (
         f"| {variant} | {bucket} | {len(records)} | {100 * right.mean():.1f} | "
         f"{int(closed.sum())} ({int(right[closed].sum())}) | {statuses.count('ambiguous')} | "
@@ -94,15 +97,15 @@ def main(argv: list[str] | None = None) -> int:
     if args.fit:
         off = params.placement.model_copy(update={"thin_cloud_calibration": (0.0, 1.0)})
         unmapped = params.model_copy(update={"placement": off})
-        closing = [
-            r
+        mains = [
+            r["main"]
             for variant in ("sparse", "vsparse")
             for r in run(variant, args.per_bucket, args.seed, unmapped)
-            if r["confidence"] is not None
+            if r["main"] is not None
         ]
         coefficients, summary = fit_logit_map(
-            [r["confidence"] for r in closing],
-            [r["right"] for r in closing],
+            [confidence for confidence, _ in mains],
+            [right for _, right in mains],
             params.placement.closed_confidence,
         )
         print(f"thin_cloud_calibration = {coefficients}: {summary}")

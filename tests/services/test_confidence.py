@@ -137,6 +137,7 @@ def test_a_frames_room_leaves_its_lost_probability_to_the_others(l_room):
     # The other rooms keep their ratios and share what the main room lost.
     ratio = mapped[1].probability / mapped[2].probability
     assert ratio == pytest.approx(clouds[1].probability / clouds[2].probability)
+    assert mapped[1].probability > clouds[1].probability
     assert sum(a.probability for a in mapped) < 1.0
 
 

@@ -36,7 +36,8 @@ def test_what_a_layout_rests_on_survives_the_wire(evidence: Evidence) -> None:
 
 
 def test_a_stored_layout_without_its_evidence_is_a_clouds():
-    # Layouts stored before the field existed were all estimated from point clouds.
+    # Layouts stored before the field existed read as clouds (a frame stored then keeps the
+    # clouds' calibration until it is laid out again).
     layout = scene_layouts()[small_scene("easy", 0).fragments[0].id]
     old = layout_to_wire(layout).model_dump(mode="json")
     del old["evidence"]

@@ -1,0 +1,48 @@
+"""Scoring helpers of the placement benchmarks: a result's main room judged, and the map of
+the confidence's logit fitted for one kind of evidence."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bench.scoring import fit_logit_map, main_room_verdict
+from services.pipeline import place_site
+from services.synthetic import ground_truth_json
+from tests.conftest import scene_layouts, small_scene
+
+pytestmark = pytest.mark.timeout(300)
+
+
+def test_a_main_room_is_judged_whatever_its_status() -> None:
+    truth = ground_truth_json(small_scene("easy", 2, 40_000))
+    result = place_site(scene_layouts("easy", 2, 40_000)).model_dump(mode="json")
+    assert result["status"] == "closed"
+    confidence = result["confidence"]
+    assert main_room_verdict(result, truth) == (confidence, True)
+    # A lone room the confidence doubts is reported open, its loop kept in the diagnostics.
+    polygon = result["floorplan"]["rooms"][0]["polygon"]
+    doubted = {
+        **result,
+        "status": "open",
+        "floorplan": {"rooms": []},
+        "diagnostics": {**result["diagnostics"], "unconfirmed_polygon": polygon},
+    }
+    assert main_room_verdict(doubted, truth) == (confidence, True)
+    moved = {**doubted["diagnostics"], "unconfirmed_polygon": (np.array(polygon) * 1.5).tolist()}
+    assert main_room_verdict({**doubted, "diagnostics": moved}, truth) == (confidence, False)
+    # An open loop without a room, or a failure, has no main room to judge.
+    unclosed = {**doubted, "diagnostics": result["diagnostics"]}
+    assert main_room_verdict(unclosed, truth) is None
+    assert main_room_verdict({**unclosed, "status": "failed"}, truth) is None
+
+
+def test_an_overconfident_kind_gets_a_map_that_lowers_its_high_confidences() -> None:
+    # Results said 0.99 that are right 70 % of the time, and 0.5 right half the time.
+    rng = np.random.default_rng(0)
+    confidences = [0.99] * 200 + [0.5] * 200
+    right = list(rng.random(200) < 0.7) + list(rng.random(200) < 0.5)
+    (bias, slope), summary = fit_logit_map(confidences, right, 0.95)
+    mapped = 1.0 / (1.0 + np.exp(-(bias + slope * np.log(0.99 / 0.01))))
+    assert 0.6 < mapped < 0.8
+    assert "400 main rooms" in summary and "after 0 (0 right)" in summary
