@@ -190,14 +190,14 @@ class PlacementParams(_Frozen):
         "conflict, its hidden corners, search truncated); (0, 1, 0, ...) is the share itself",
     )
     frame_calibration: tuple[float, float] = Field(
-        (-0.999, 0.687),
+        (-1.059, 0.704),
         description="(bias, slope) mapping the main room's calibrated logit z to a + b z when "
         "its pieces are RGB-D frames (a share of the pieces: that share of the change): a "
         "frame's chain is wrong more often than a cloud's (bench/rgbd_frames.py --fit, tune "
         "seeds); (0, 1) leaves frames as clouds",
     )
     thin_cloud_calibration: tuple[float, float] = Field(
-        (-0.62, 0.674),
+        (-0.682, 0.677),
         description="the same map for clouds thinner than layout.min_calibrated_points "
         "(bench/sensor_stress.py --fit, tune seeds)",
     )
