@@ -133,8 +133,7 @@ class _Search:
     turned_rotation_cost: FloatArray = field(init=False)
     reach: FloatArray = field(init=False)  # [j, d]: piece j's reach along direction d
     chain_ends: FloatArray = field(init=False)  # [j, r]: piece j's target at rotation r
-    displacement: list[list[tuple[FloatArray, FloatArray]]] = field(init=False)  # [in][out]
-    # The same as arrays (4, 4, 2) [in, out]: mean and variance of a junction's displacement.
+    # (4, 4, 2) [heading in, heading out]: mean and variance of a junction's displacement.
     step_mean: FloatArray = field(init=False)
     step_var: FloatArray = field(init=False)
     # Per piece: its prior's source (n, 2), that source's variance (n,), whether it has one.
@@ -162,12 +161,12 @@ class _Search:
         self.rotation_cost = _rotation_costs(self.pieces, self.hints, self.frame)
         quarters = (np.arange(4)[:, None] + np.arange(4)[None, :]) % 4  # [r, q] -> r + q
         self.turned_rotation_cost = self.rotation_cost[:, quarters]
-        self.displacement = [
+        steps = [
             [junction_displacement(self.noise, h_in, h_out) for h_out in range(4)]
             for h_in in range(4)
         ]
-        self.step_mean = np.array([[m for m, _ in row] for row in self.displacement])
-        self.step_var = np.array([[v for _, v in row] for row in self.displacement])
+        self.step_mean = np.array([[m for m, _ in row] for row in steps])
+        self.step_var = np.array([[v for _, v in row] for row in steps])
         priors = [self.hints.priors.get(p.id) for p in self.pieces]
         self.has_prior = np.array([prior is not None for prior in priors], dtype=bool)
         self.prior_source = np.array(
@@ -441,7 +440,10 @@ def _extend(
         return None
     samples = local_samples + state.end
     heading_out = (piece.directions[0] + rotation) % 4
-    mean, var = search.displacement[state.heading][heading_out]
+    mean, var = (
+        search.step_mean[state.heading, heading_out],
+        search.step_var[state.heading, heading_out],
+    )
     drift_mean, drift_var = state.mean + mean, state.var + var  # hidden displacement so far
     prev = state.order[-1]
     features = state.features.copy()
@@ -500,7 +502,11 @@ def _close(search: _Search, state: _State) -> None:
         features[_F["turns"]] += turn != 0
         features[_F["structure"]] += search.structure[last, 0]
         features[_F["boundary"]] += search.boundary[last, 0]
-        mean, var = search.displacement[state.heading][first.directions[0]]
+        heading_in = first.directions[0]
+        mean, var = (
+            search.step_mean[state.heading, heading_in],
+            search.step_var[state.heading, heading_in],
+        )
         features[_F["closure"]] = closure_nll(state.end, state.mean + mean, state.var + var)
         if search.pairs:
             violated, _ = _resolve_pairs(search, state, {last: 0})
@@ -645,7 +651,7 @@ def _bounds(
     if search.frame is not None:
         # The child's own prior is known exactly: it replaces the state's and the floor
         # counted for j's rotation.
-        own, positions = _child_priors(search, state, js, rotations)
+        own, positions = _child_priors(search, state, js, rotations, turns)
         floor_of_j = search.rotation_cost[js].min(axis=1)
         bounds += weights[_F["prior"]] * (own - state.features[_F["prior"]] - floor_of_j)
     if search.require_closed:
@@ -655,20 +661,19 @@ def _bounds(
 
 
 def _child_priors(
-    search: _Search, state: _State, js: list[int], rotations: list[int]
+    search: _Search, state: _State, js: list[int], rotations: list[int], turns: NDArray[np.intp]
 ) -> tuple[FloatArray, FloatArray]:
-    """The prior feature of each child (piece js[c] at rotations[c], its source at the
-    state's end), as :func:`_extend` computes it: rotation costs and position costs (see
-    :func:`_anchor`), the least over the frame's quarter turns; and the position costs
-    per quarter turn (C, 4)."""
+    """The prior feature of each child (piece js[c] at rotations[c] after a junction that
+    turns by turns[c], its source at the state's end), as :func:`_extend` computes it:
+    rotation costs and position costs (see :func:`_anchor`), the least over the frame's
+    quarter turns; and the position costs per quarter turn (C, 4)."""
     pieces = np.asarray(js)
     costs = state.rotation_prior[None, :] + search.turned_rotation_cost[pieces, rotations]
     position = np.tile(state.position, (len(js), 1))
     with_prior = np.flatnonzero(search.has_prior[pieces])
     if len(with_prior) and state.anchors:
         chosen = pieces[with_prior]
-        headings = (np.array([search.pieces[j].directions[0] for j in chosen])
-                    + np.asarray(rotations)[with_prior]) % 4  # fmt: skip
+        headings = (state.heading + turns[with_prior]) % 4  # each child's first wall
         drift_mean = state.mean + search.step_mean[state.heading, headings]
         drift_var = state.var + search.step_var[state.heading, headings]
         new = _anchor_rows(search, chosen, state.end, drift_mean, drift_var)
