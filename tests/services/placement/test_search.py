@@ -159,7 +159,8 @@ def test_a_childs_bound_holds_its_own_prior_exactly(l_room):
         options = search_module._options(search, state, remaining)
         js = [j for j, _ in options]
         rotations = [(state.heading + t - pieces[j].directions[0]) % 4 for j, t in options]
-        own, positions = search_module._child_priors(search, state, js, rotations)
+        turns = np.array([t for _, t in options])
+        own, positions = search_module._child_priors(search, state, js, rotations, turns)
         extended = [search_module._extend(search, state, j, t) for j, t in options]
         valid = {k: child for k, child in enumerate(extended) if child is not None}
         assert valid
