@@ -431,18 +431,22 @@ def _facing_cameras(
     (:func:`_shadowed`) are not taken for open space, whatever lies in front of them."""
     centre = np.mean([view.centre[:2] for view in views], axis=0)
     facing = _turned_to_camera(lines, centre)
+    closed: dict[tuple[int, float], NDArray[np.bool_]] = {}  # (near, away) -> doors closed
     kept = []
     for far in facing:
         c_off, c_run = centre[1 - far.axis], centre[far.axis]
         high = far.high.copy()
         run = far.origin + (np.arange(len(high)) + 0.5) * far.cell_size
-        for near in lines:  # any wall points occlude, whichever side they face
+        for n, near in enumerate(lines):  # any wall points occlude, whichever side they face
             if near.axis != far.axis or near.occupied is None:
                 continue
             ratio = (near.offset - c_off) / (far.offset - c_off)
             if not 0.0 < ratio < 1.0 - _NEAR_STRIP:
                 continue
-            occupied = _doors_closed(near, lines, np.sign(far.offset - near.offset))
+            away = float(np.sign(far.offset - near.offset))
+            if (n, away) not in closed:
+                closed[n, away] = _doors_closed(near, lines, away)
+            occupied = closed[n, away]
             cell = np.rint((c_run + (run - c_run) * ratio - near.origin) / near.cell_size)
             inside = (cell >= 1) & (cell < len(occupied) - 1)
             index = cell[inside].astype(np.int64)
