@@ -92,17 +92,18 @@ def alternative_results(result: Mapping[str, Any]) -> list[dict[str, Any]]:
 
 
 def main_room_verdict(
-    result: Mapping[str, Any], truth: Mapping[str, Any]
+    result: Mapping[str, Any], truth: Mapping[str, Any], reported_right: bool
 ) -> tuple[float, bool] | None:
     """(confidence, right) of a result's main room, None when its loop did not close.
 
     What a confidence map is fitted on: every result with a main assembly, whatever its
-    status. A lone room the confidence doubts is reported 'open' without a floorplan (the
-    contract wants a runner-up for 'ambiguous'), so it is judged by the loop it kept in
-    ``diagnostics.unconfirmed_polygon``.
+    status. ``reported_right``: the result's own verdict (``evaluate_result``), the main
+    room's when it is closed or ambiguous. A lone room the confidence doubts is reported
+    'open' without a floorplan (the contract wants a runner-up for 'ambiguous'), so it is
+    judged by the loop it kept in ``diagnostics.unconfirmed_polygon``.
     """
     if result["status"] in ("closed", "ambiguous"):
-        return float(result["confidence"]), evaluate_result(result, truth).global_correct
+        return float(result["confidence"]), reported_right
     polygon = result.get("diagnostics", {}).get("unconfirmed_polygon")
     if result["status"] != "open" or polygon is None:
         return None

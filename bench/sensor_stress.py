@@ -60,14 +60,14 @@ def run(
             layouts = {f.id: estimate_layout(f.points, params) for f in scene.fragments}
             result = place_site(layouts, params).model_dump(mode="json")
             truth = ground_truth_json(scene)
-            verdict = main_room_verdict(result, truth)
+            right = evaluate_result(result, truth).global_correct
             records.append(
                 {
                     "bucket": f"{lo}-{hi}",
                     "status": result["status"],
-                    "right": evaluate_result(result, truth).global_correct,
+                    "right": right,
                     # The main room's confidence and verdict (None: the loop did not close).
-                    "main": verdict,
+                    "main": main_room_verdict(result, truth, right),
                 }
             )
     return records

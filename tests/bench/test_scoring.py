@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from bench.scoring import fit_logit_map, main_room_verdict
+from services.evaluation import evaluate_result
 from services.pipeline import place_site
 from services.synthetic import ground_truth_json
 from tests.conftest import scene_layouts, small_scene
@@ -19,7 +20,8 @@ def test_a_main_room_is_judged_whatever_its_status() -> None:
     result = place_site(scene_layouts("easy", 2, 40_000)).model_dump(mode="json")
     assert result["status"] == "closed"
     confidence = result["confidence"]
-    assert main_room_verdict(result, truth) == (confidence, True)
+    reported = evaluate_result(result, truth).global_correct
+    assert main_room_verdict(result, truth, reported) == (confidence, True)
     # A lone room the confidence doubts is reported open, its loop kept in the diagnostics.
     polygon = result["floorplan"]["rooms"][0]["polygon"]
     doubted = {
@@ -28,13 +30,13 @@ def test_a_main_room_is_judged_whatever_its_status() -> None:
         "floorplan": {"rooms": []},
         "diagnostics": {**result["diagnostics"], "unconfirmed_polygon": polygon},
     }
-    assert main_room_verdict(doubted, truth) == (confidence, True)
+    assert main_room_verdict(doubted, truth, False) == (confidence, True)
     moved = {**doubted["diagnostics"], "unconfirmed_polygon": (np.array(polygon) * 1.5).tolist()}
-    assert main_room_verdict({**doubted, "diagnostics": moved}, truth) == (confidence, False)
+    assert main_room_verdict({**doubted, "diagnostics": moved}, truth, False) == (confidence, False)
     # An open loop without a room, or a failure, has no main room to judge.
     unclosed = {**doubted, "diagnostics": result["diagnostics"]}
-    assert main_room_verdict(unclosed, truth) is None
-    assert main_room_verdict({**unclosed, "status": "failed"}, truth) is None
+    assert main_room_verdict(unclosed, truth, False) is None
+    assert main_room_verdict({**unclosed, "status": "failed"}, truth, False) is None
 
 
 def test_an_overconfident_kind_gets_a_map_that_lowers_its_high_confidences() -> None:
