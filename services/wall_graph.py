@@ -29,6 +29,7 @@ _MAX_OPEN_GAP = 0.5  # m, longest stretch a wall may run with nothing scanned be
 _CORNER_METERS = 0.3  # covered wall a corner must add to be worth it, m
 _COST_METERS = 0.1  # tie-break: meters of covered wall per unit of path cost
 _SNAP_CELLS = 2.0  # a segment end this close to a deduced corner is merged into it
+_END_MATCH = 0.05  # m, a line this close to a chain's end wall is that wall's line
 
 
 @dataclass(frozen=True)
@@ -342,5 +343,33 @@ def find_wall_chain(
     if found is None:
         return None
     order, cost = found
-    points = np.array([nodes.points[i] for i in order])
-    return WallChain(keypoints=_corners_only(points), cost=cost)
+    points = _corners_only(np.array([nodes.points[i] for i in order]))
+    return WallChain(keypoints=_through_doorways(points, lines), cost=cost)
+
+
+def _through_doorways(points: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
+    """The chain with each end carried across a doorway it stops at.
+
+    A scan that ends inside a doorway sees its jamb, and past it the lintel over the opening
+    with the next room's floor behind it; the wall runs on through the opening, as far as
+    the lintel was seen. Without a lintel (space seen on both sides of the line and no wall
+    above it) the line runs on through the room past a corner: no extension.
+    """
+    out = points.copy()
+    for end, inner in ((0, 1), (-1, -2)):
+        step = out[end] - out[inner]
+        axis = int(abs(step[1]) > abs(step[0]))
+        outward = 1 if step[axis] > 0 else -1
+        travel = outward if end == -1 else -outward  # the chain's direction along the wall
+        reach = max(
+            (
+                line.doorway_beyond(float(out[end, axis]), outward)
+                for line in lines
+                if line.axis == axis
+                and line.travel == travel
+                and abs(line.offset - out[end, 1 - axis]) < _END_MATCH
+            ),
+            default=0.0,
+        )
+        out[end, axis] += outward * reach
+    return out

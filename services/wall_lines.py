@@ -42,6 +42,8 @@ _AXIS_COS = float(np.cos(np.radians(25.0)))  # a normal within 25 deg of an axis
 # run with space seen on both sides (services.wall_graph, services.frame_layout)
 MAX_DOORWAY = 2.0
 _RECESS_DEPTH = 0.3  # m, a wall reaching this far behind a gap's edge: a recess, not a door
+_MIN_DOORWAY = 0.3  # m, least doorway a wall's end is carried across
+_LINTEL_LOW = 1.8  # m over the floor: a column whose wall points all stand higher spans an opening
 
 
 @dataclass(frozen=True)
@@ -60,6 +62,8 @@ class WallLine:
     seen_through: (C,) bool or None: cells with no evidence where space was scanned behind
     the line as well as in front (None on a deduced wall).
     occupied: (C,) bool or None: cells holding any wall point of the line, at any height.
+    lintel: (C,) bool or None: cells whose wall points all stand over door height (the
+    wall above an opening).
     """
 
     axis: int
@@ -73,6 +77,7 @@ class WallLine:
     unsupported: NDArray[np.bool_] | None = None
     seen_through: NDArray[np.bool_] | None = None
     occupied: NDArray[np.bool_] | None = None
+    lintel: NDArray[np.bool_] | None = None
 
     def open_gap(self, start: float, end: float) -> float:
         """Longest stretch (m) between two run coordinates with neither wall evidence nor
@@ -83,6 +88,30 @@ class WallLine:
         """Longest stretch (m) between two run coordinates where the scan saw space on both
         sides of the line: no wall stands there, at most a doorway."""
         return self._longest_run(self.seen_through, start, end)
+
+    def doorway_beyond(self, run: float, outward: int) -> float:
+        """How far (m) a doorway runs on from a segment end at run coordinate ``run`` in
+        direction ``outward`` (+1 or -1): cells seen through with wall points above them
+        (a lintel), starting within a few cells of the end. 0 when there is none, or it is
+        too short or too wide for a door (space seen on both sides with no wall above is
+        the room running on past a corner)."""
+        if self.seen_through is None or self.lintel is None:
+            return 0.0
+        doorway = self.seen_through & self.lintel
+        first = int(np.rint((run - self.origin) / self.cell_size)) - (outward < 0)
+        limit = int(np.ceil(MAX_DOORWAY / self.cell_size)) + _MAX_GAP_CELLS + 1
+        if outward > 0:
+            ahead = doorway[max(first, 0) : first + limit]
+        else:
+            ahead = doorway[max(first - limit + 1, 0) : max(first + 1, 0)][::-1]
+        spans = _runs(ahead, max_gap=_MAX_GAP_CELLS, min_len=1)
+        if not spans or spans[0][0] > _MAX_GAP_CELLS:
+            return 0.0
+        start, stop = spans[0]
+        width = (stop - start) * self.cell_size
+        if width < _MIN_DOORWAY or stop * self.cell_size > MAX_DOORWAY:
+            return 0.0
+        return stop * self.cell_size
 
     def _longest_run(self, flags: NDArray[np.bool_] | None, start: float, end: float) -> float:
         if flags is None:
@@ -253,6 +282,9 @@ def _lines_from_peak(
     keys = np.unique(cells * 4096 + z_bins)
     reach = np.zeros(n_cells, dtype=np.int64)
     np.maximum.at(reach, keys // 4096, keys % 4096)
+    lowest = np.full(n_cells, 4096, dtype=np.int64)
+    np.minimum.at(lowest, keys // 4096, keys % 4096)
+    lintel = (lowest < 4096) & (lowest * s >= _LINTEL_LOW)
     run = origin + (np.arange(n_cells) + 0.5) * s
     xy = np.column_stack([run, np.full(n_cells, offset)])
     least_n, least_top = rule.per_cell(xy if axis == 0 else xy[:, ::-1], s)
@@ -283,6 +315,7 @@ def _lines_from_peak(
                 unsupported,
                 seen_through,
                 np.bincount(cells, minlength=n_cells) > 0,
+                lintel,
             )
         )
     return lines

@@ -104,3 +104,39 @@ def test_a_door_seen_through_is_still_bridged():
     chain = find_wall_chain([dataclasses.replace(main, seen_through=flags)], LayoutParams())
     assert chain is not None
     assert np.allclose(chain.keypoints, [[0.0, 1.0], [6.0, 1.0]], atol=0.05)
+
+
+def _ends_in_doorway(width: float, lintel: bool, source_side: bool) -> WallLine:
+    """A wall along x at y = 1 (interior +y) seen from x = 0 to 3.04, the scan ending inside
+    a doorway: floor seen behind the line over ``width`` m past the wall's right end (its
+    left end when ``source_side``), with a wall over it when ``lintel``."""
+    line = _line(0, 1.0, 1, [(0.0, 3.04)])  # 3.04: a cell boundary of the grid at -2
+    lo, hi = (-width, 0.0) if source_side else (3.04, 3.04 + width)
+    cells = slice(round((lo - line.origin) / CELL), round((hi - line.origin) / CELL))
+    seen_through = np.zeros_like(line.high)
+    seen_through[cells] = True
+    over_opening = np.zeros_like(line.high)
+    over_opening[cells] = lintel
+    return dataclasses.replace(line, seen_through=seen_through, lintel=over_opening)
+
+
+@pytest.mark.parametrize("source_side", [False, True])
+def test_a_chain_that_stops_in_a_doorway_runs_on_under_its_lintel(source_side):
+    chain = find_wall_chain([_ends_in_doorway(0.88, True, source_side)], LayoutParams())
+    assert chain is not None
+    expected = [[-0.88, 1.0], [3.04, 1.0]] if source_side else [[0.0, 1.0], [3.92, 1.0]]
+    assert np.allclose(chain.keypoints, expected, atol=0.01)
+
+
+@pytest.mark.parametrize(
+    "width, lintel",
+    [
+        (0.88, False),  # space on both sides, nothing above: the room runs on past a corner
+        (2.4, True),  # wider than a doorway
+        (0.16, True),  # a sliver: a jamb's shadow, not a door
+    ],
+)
+def test_a_chain_end_stays_without_a_doorway(width, lintel):
+    chain = find_wall_chain([_ends_in_doorway(width, lintel, False)], LayoutParams())
+    assert chain is not None
+    assert np.allclose(chain.keypoints, [[0.0, 1.0], [3.04, 1.0]], atol=0.01)

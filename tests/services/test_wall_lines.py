@@ -219,3 +219,33 @@ def test_a_wall_is_in_shadow_where_a_nearer_wall_stands_between_it_and_the_camer
     # A wall does not shadow itself, nor does one behind it.
     behind = dataclasses.replace(side, offset=6.0)
     assert not _shadowed(wall, [wall, behind], np.array([2.7, 1.3])).any()
+
+
+@pytest.mark.parametrize("lintel", [True, False])
+def test_a_door_at_a_walls_end_is_told_by_its_lintel(lintel):
+    # A wall along x at y = 0 (interior +y) from x = 0 to 3, then a doorway to x = 3.9:
+    # floor seen through it behind the line, and the wall over the door (z 2.05 to 2.6)
+    # when ``lintel``; without one, the line just runs on past the wall's end.
+    rng = np.random.default_rng(8)
+    x, z = rng.uniform(0, 3, 4000), rng.uniform(0, 2.6, 4000)
+    parts = [np.column_stack([x, np.zeros_like(x), z])]
+    if lintel:
+        x, z = rng.uniform(3, 3.9, 600), rng.uniform(2.05, 2.6, 600)
+        parts.append(np.column_stack([x, np.zeros_like(x), z]))
+    wall = np.vstack(parts)
+    floor = np.column_stack(
+        [rng.uniform(0, 3.9, 12000), rng.uniform(-1.5, 4, 12000), np.zeros(12000)]
+    )
+    floor = floor[(floor[:, 0] > 3.05) | (floor[:, 1] > 0.0)]
+    points = np.vstack([wall, floor])
+    normals = np.vstack(
+        [np.tile([0.0, 1.0, 0.0], (len(wall), 1)), np.tile([0, 0, 1.0], (len(floor), 1))]
+    )
+    (line,) = [
+        ln for ln in find_wall_lines(points, normals, 0.0, 2.6, LayoutParams()) if ln.axis == 0
+    ]
+    end = float(line.segments[-1, 1])
+    assert end == pytest.approx(3.0, abs=0.1)
+    reach = line.doorway_beyond(end, 1)
+    assert reach == (pytest.approx(0.9, abs=0.1) if lintel else 0.0)
+    assert line.doorway_beyond(float(line.segments[0, 0]), -1) == 0.0  # nothing seen there
