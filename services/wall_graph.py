@@ -348,12 +348,13 @@ def find_wall_chain(
 
 
 def _through_doorways(points: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
-    """The chain with each end carried across a doorway it stops at.
+    """The chain with each end carried on along wall seen only above door height.
 
     A scan that ends inside a doorway sees its jamb, and past it the lintel over the opening
     with the next room's floor behind it; the wall runs on through the opening, as far as
-    the lintel was seen. Without a lintel (space seen on both sides of the line and no wall
-    above it) the line runs on through the room past a corner: no extension.
+    the lintel was seen. A wardrobe against the wall hides its lower part the same way
+    (:meth:`WallLine.doorway_beyond`). Without wall above (space seen on both sides of the
+    line) the line runs on through the room past a corner: no extension.
     """
     out = points.copy()
     for end, inner in ((0, 1), (-1, -2)):

@@ -43,6 +43,7 @@ _AXIS_COS = float(np.cos(np.radians(25.0)))  # a normal within 25 deg of an axis
 MAX_DOORWAY = 2.0
 _RECESS_DEPTH = 0.3  # m, a wall reaching this far behind a gap's edge: a recess, not a door
 _MIN_DOORWAY = 0.3  # m, least doorway a wall's end is carried across
+_MIN_HIDDEN_WALL = 0.6  # m, least wall seen only over tall furniture a wall's end runs on along
 _LINTEL_LOW = 1.8  # m over the floor: a column whose wall points all stand higher spans an opening
 
 
@@ -90,26 +91,29 @@ class WallLine:
         return self._longest_run(self.seen_through, start, end)
 
     def doorway_beyond(self, run: float, outward: int) -> float:
-        """How far (m) a doorway runs on from a segment end at run coordinate ``run`` in
-        direction ``outward`` (+1 or -1): cells seen through with wall points above them
-        (a lintel), starting within a few cells of the end. 0 when there is none, or it is
-        too short or too wide for a door (space seen on both sides with no wall above is
-        the room running on past a corner)."""
+        """How far (m) the wall runs on, seen only above door height, from a segment end at
+        run coordinate ``run`` in direction ``outward`` (+1 or -1), starting within a few
+        cells of the end: the lintel over a doorway (space seen behind the line under it)
+        or a wall whose lower part tall furniture hides. 0 when there is none, or it is too
+        short (0.3 m for a doorway, 0.6 m for a hidden wall: a corner's clutter) or wider
+        than a doorway."""
         if self.seen_through is None or self.lintel is None:
             return 0.0
-        doorway = self.seen_through & self.lintel
         first = int(np.rint((run - self.origin) / self.cell_size)) - (outward < 0)
         limit = int(np.ceil(MAX_DOORWAY / self.cell_size)) + _MAX_GAP_CELLS + 1
-        if outward > 0:
-            ahead = doorway[max(first, 0) : first + limit]
-        else:
-            ahead = doorway[max(first - limit + 1, 0) : max(first + 1, 0)][::-1]
-        spans = _runs(ahead, max_gap=_MAX_GAP_CELLS, min_len=1)
+
+        def ahead(flags: NDArray[np.bool_]) -> NDArray[np.bool_]:
+            if outward > 0:
+                return flags[max(first, 0) : first + limit]
+            return flags[max(first - limit + 1, 0) : max(first + 1, 0)][::-1]
+
+        spans = _runs(ahead(self.lintel), max_gap=_MAX_GAP_CELLS, min_len=1)
         if not spans or spans[0][0] > _MAX_GAP_CELLS:
             return 0.0
         start, stop = spans[0]
-        width = (stop - start) * self.cell_size
-        if width < _MIN_DOORWAY or stop * self.cell_size > MAX_DOORWAY:
+        doorway = bool(ahead(self.seen_through)[start:stop].any())
+        least = _MIN_DOORWAY if doorway else _MIN_HIDDEN_WALL
+        if (stop - start) * self.cell_size < least or stop * self.cell_size > MAX_DOORWAY:
             return 0.0
         return stop * self.cell_size
 

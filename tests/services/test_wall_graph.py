@@ -106,15 +106,18 @@ def test_a_door_seen_through_is_still_bridged():
     assert np.allclose(chain.keypoints, [[0.0, 1.0], [6.0, 1.0]], atol=0.05)
 
 
-def _ends_in_doorway(width: float, lintel: bool, source_side: bool) -> WallLine:
+def _ends_in_doorway(
+    width: float, lintel: bool, source_side: bool, seen_behind: bool = True
+) -> WallLine:
     """A wall along x at y = 1 (interior +y) seen from x = 0 to 3.04, the scan ending inside
     a doorway: floor seen behind the line over ``width`` m past the wall's right end (its
-    left end when ``source_side``), with a wall over it when ``lintel``."""
+    left end when ``source_side``; nothing seen behind unless ``seen_behind``), with a wall
+    over it when ``lintel``."""
     line = _line(0, 1.0, 1, [(0.0, 3.04)])  # 3.04: a cell boundary of the grid at -2
     lo, hi = (-width, 0.0) if source_side else (3.04, 3.04 + width)
     cells = slice(round((lo - line.origin) / CELL), round((hi - line.origin) / CELL))
     seen_through = np.zeros_like(line.high)
-    seen_through[cells] = True
+    seen_through[cells] = seen_behind
     over_opening = np.zeros_like(line.high)
     over_opening[cells] = lintel
     return dataclasses.replace(line, seen_through=seen_through, lintel=over_opening)
@@ -140,3 +143,14 @@ def test_a_chain_end_stays_without_a_doorway(width, lintel):
     chain = find_wall_chain([_ends_in_doorway(width, lintel, False)], LayoutParams())
     assert chain is not None
     assert np.allclose(chain.keypoints, [[0.0, 1.0], [3.04, 1.0]], atol=0.01)
+
+
+@pytest.mark.parametrize("width, runs_on", [(0.88, True), (0.4, False)])
+def test_a_wall_hidden_below_by_tall_furniture_runs_on_if_long_enough(width, runs_on):
+    # Wall seen only above door height and nothing seen behind it: a wardrobe hides its
+    # lower part. A short such run is a corner's clutter, not wall.
+    line = _ends_in_doorway(width, lintel=True, source_side=False, seen_behind=False)
+    chain = find_wall_chain([line], LayoutParams())
+    assert chain is not None
+    end = 3.04 + (width if runs_on else 0.0)
+    assert np.allclose(chain.keypoints, [[0.0, 1.0], [end, 1.0]], atol=0.01)
