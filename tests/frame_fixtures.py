@@ -19,7 +19,7 @@ from services.synthetic.render import (
     KINECT,
     FrameScene,
     FrameSpec,
-    _camera_pose,
+    camera_pose,
     generate_frame_scene,
     render_frame,
     scene_mesh,
@@ -59,7 +59,7 @@ def render_views(
     scene.add_triangles(o3d.core.Tensor.from_numpy(vertices), o3d.core.Tensor.from_numpy(triangles))
     out = {}
     for name, (position, yaw, pitch) in stances.items():
-        pose = _camera_pose(np.array(position), math.radians(yaw), math.radians(pitch), 0.0)
+        pose = camera_pose(np.array(position), math.radians(yaw), math.radians(pitch), 0.0)
         render = render_frame(scene, material, pose, KINECT, 7.0)
         out[name] = (RgbdFrame(render.depth, KINECT, render.color), pose)
     return out

@@ -49,6 +49,7 @@ __all__ = [
     "FrameScene",
     "FrameSpec",
     "SyntheticFrame",
+    "camera_pose",
     "frame_ground_truth_json",
     "generate_frame_scene",
     "render_frame",
@@ -321,7 +322,7 @@ def _kinect_noise(
 # --------------------------------------------------------------------------------------------
 
 
-def _camera_pose(position: FloatArray, yaw: float, pitch: float, roll: float) -> FloatArray:
+def camera_pose(position: FloatArray, yaw: float, pitch: float, roll: float) -> FloatArray:
     """Optical -> world pose of a camera at ``position`` (3,), heading ``yaw`` (radians from
     +x), tilted by ``pitch`` (negative: down) and rolled by ``roll`` about its axis."""
     forward = np.array(
@@ -582,7 +583,7 @@ def _render_scene(
         pitch = math.radians(float(rng.uniform(*spec.pitch_deg)))
         roll = math.radians(float(rng.uniform(-spec.roll_deg, spec.roll_deg)))
         position = np.append(stations[view.station], height)
-        pose = _camera_pose(position, view.yaw, pitch, roll)
+        pose = camera_pose(position, view.yaw, pitch, roll)
         render = render_frame(raycaster, material, pose, spec.intrinsics, spec.max_range)
         depth = _kinect_noise(rng, render.depth, spec.dropout) if spec.noise else render.depth
         keypoints = stretch_keypoints(room, Stretch(view.start, view.length))
