@@ -7,8 +7,9 @@ a "tune" split (weights and calibration are fitted there) and a "test" split (fi
 reported there): different seeds, and for real shapes different houses.
 
 The local layouts are the expensive part, so each scene's ground truth and layouts are
-cached under ``out/bench-cache/<set>/<seed>.json`` (versioned JSON; the layout wire form of
-the service), and reused by every placement configuration.
+cached under ``out/bench-cache/v<CACHE_VERSION>/<set>/<seed>.json`` (versioned JSON; the
+layout wire form of the service), and reused by every placement configuration. A change to
+the layouts bumps ``CACHE_VERSION``: the next run builds a new set beside the old one.
 """
 
 from __future__ import annotations
@@ -92,6 +93,7 @@ class _Job:
 def scene_jobs(split: Split, per_bucket: int, real: int, cache: Path = DEFAULT_CACHE) -> list[_Job]:
     """The scenes of one split: ``per_bucket`` random rooms per bucket, ``real`` real ones."""
     base = _SEED_BASE[split]
+    cache = cache / f"v{CACHE_VERSION}"
     jobs = []
     if real:
         raw = json.loads(DEFAULT_PATH.read_text())
@@ -112,7 +114,7 @@ def scene_jobs(split: Split, per_bucket: int, real: int, cache: Path = DEFAULT_C
 
 def _build(job: _Job) -> str:
     """Generate one scene, estimate its layouts and write the cache file (atomically)."""
-    if _cached(job):
+    if os.path.exists(job.path):
         return job.path
     spec = dataclasses.replace(SceneSpec.world(), n_fragments_range=job.n_range)
     start = time.perf_counter()
@@ -134,19 +136,11 @@ def _build(job: _Job) -> str:
     return job.path
 
 
-def _cached(job: _Job) -> bool:
-    """True when the job's cache file exists and was written by this version of the cache
-    (a layout change bumps ``CACHE_VERSION``, and older files are built again)."""
-    if not os.path.exists(job.path):
-        return False
-    return bool(json.loads(Path(job.path).read_text()).get("version") == CACHE_VERSION)
-
-
 def build_sets(
     jobs: list[_Job], workers: int = 2, report: Callable[[str], None] = lambda line: None
 ) -> None:
     """Build every scene not cached yet, ``workers`` processes at a time."""
-    missing = [job for job in jobs if not _cached(job)]
+    missing = [job for job in jobs if not os.path.exists(job.path)]
     if not missing:
         return
     with ProcessPoolExecutor(workers) as pool:
