@@ -133,9 +133,9 @@ class _Search:
     turned_rotation_cost: FloatArray = field(init=False)
     reach: FloatArray = field(init=False)  # [j, d]: piece j's reach along direction d
     chain_ends: FloatArray = field(init=False)  # [j, r]: piece j's target at rotation r
-    # (4, 4, 2) [heading in, heading out]: mean and variance of a junction's displacement.
-    step_mean: FloatArray = field(init=False)
-    step_var: FloatArray = field(init=False)
+    # (4, 4, 2, 2) [heading in, heading out]: mean (2,) and variance (2,) of a junction's
+    # displacement.
+    step: FloatArray = field(init=False)
     # Per piece: its prior's source (n, 2), that source's variance (n,), whether it has one.
     prior_source: FloatArray = field(init=False)
     prior_variance: FloatArray = field(init=False)
@@ -161,12 +161,12 @@ class _Search:
         self.rotation_cost = _rotation_costs(self.pieces, self.hints, self.frame)
         quarters = (np.arange(4)[:, None] + np.arange(4)[None, :]) % 4  # [r, q] -> r + q
         self.turned_rotation_cost = self.rotation_cost[:, quarters]
-        steps = [
-            [junction_displacement(self.noise, h_in, h_out) for h_out in range(4)]
-            for h_in in range(4)
-        ]
-        self.step_mean = np.array([[m for m, _ in row] for row in steps])
-        self.step_var = np.array([[v for _, v in row] for row in steps])
+        self.step = np.array(
+            [
+                [junction_displacement(self.noise, h_in, h_out) for h_out in range(4)]
+                for h_in in range(4)
+            ]
+        )
         priors = [self.hints.priors.get(p.id) for p in self.pieces]
         self.has_prior = np.array([prior is not None for prior in priors], dtype=bool)
         self.prior_source = np.array(
@@ -440,10 +440,7 @@ def _extend(
         return None
     samples = local_samples + state.end
     heading_out = (piece.directions[0] + rotation) % 4
-    mean, var = (
-        search.step_mean[state.heading, heading_out],
-        search.step_var[state.heading, heading_out],
-    )
+    mean, var = search.step[state.heading, heading_out]
     drift_mean, drift_var = state.mean + mean, state.var + var  # hidden displacement so far
     prev = state.order[-1]
     features = state.features.copy()
@@ -502,11 +499,7 @@ def _close(search: _Search, state: _State) -> None:
         features[_F["turns"]] += turn != 0
         features[_F["structure"]] += search.structure[last, 0]
         features[_F["boundary"]] += search.boundary[last, 0]
-        heading_in = first.directions[0]
-        mean, var = (
-            search.step_mean[state.heading, heading_in],
-            search.step_var[state.heading, heading_in],
-        )
+        mean, var = search.step[state.heading, first.directions[0]]
         features[_F["closure"]] = closure_nll(state.end, state.mean + mean, state.var + var)
         if search.pairs:
             violated, _ = _resolve_pairs(search, state, {last: 0})
@@ -674,8 +667,8 @@ def _child_priors(
     if len(with_prior) and state.anchors:
         chosen = pieces[with_prior]
         headings = (state.heading + turns[with_prior]) % 4  # each child's first wall
-        drift_mean = state.mean + search.step_mean[state.heading, headings]
-        drift_var = state.var + search.step_var[state.heading, headings]
+        steps = search.step[state.heading, headings]
+        drift_mean, drift_var = state.mean + steps[:, 0], state.var + steps[:, 1]
         new = _anchor_rows(search, chosen, state.end, drift_mean, drift_var)
         placed = np.broadcast_to(np.asarray(state.anchors), (len(chosen), len(state.anchors), 5))
         position[with_prior] = position_costs_batch(np.concatenate([placed, new[:, None]], 1))
