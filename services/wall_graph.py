@@ -344,16 +344,16 @@ def find_wall_chain(
         return None
     order, cost = found
     points = _corners_only(np.array([nodes.points[i] for i in order]))
-    return WallChain(keypoints=_through_doorways(points, lines), cost=cost)
+    return WallChain(keypoints=_ends_along_high_wall(points, lines), cost=cost)
 
 
-def _through_doorways(points: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
+def _ends_along_high_wall(points: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
     """The chain with each end carried on along wall seen only above door height.
 
     A scan that ends inside a doorway sees its jamb, and past it the lintel over the opening
     with the next room's floor behind it; the wall runs on through the opening, as far as
     the lintel was seen. A wardrobe against the wall hides its lower part the same way
-    (:meth:`WallLine.doorway_beyond`). Without wall above (space seen on both sides of the
+    (:meth:`WallLine.high_wall_beyond`). Without wall above (space seen on both sides of the
     line) the line runs on through the room past a corner: no extension.
     """
     out = points.copy()
@@ -364,7 +364,7 @@ def _through_doorways(points: FloatArray, lines: Sequence[WallLine]) -> FloatArr
         travel = outward if end == -1 else -outward  # the chain's direction along the wall
         reach = max(
             (
-                line.doorway_beyond(float(out[end, axis]), outward)
+                line.high_wall_beyond(float(out[end, axis]), outward)
                 for line in lines
                 if line.axis == axis
                 and line.travel == travel

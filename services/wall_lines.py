@@ -90,7 +90,7 @@ class WallLine:
         sides of the line: no wall stands there, at most a doorway."""
         return self._longest_run(self.seen_through, start, end)
 
-    def doorway_beyond(self, run: float, outward: int) -> float:
+    def high_wall_beyond(self, run: float, outward: int) -> float:
         """How far (m) the wall runs on, seen only above door height, from a segment end at
         run coordinate ``run`` in direction ``outward`` (+1 or -1), starting within a few
         cells of the end: the lintel over a doorway (space seen behind the line under it)

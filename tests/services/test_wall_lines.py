@@ -246,6 +246,6 @@ def test_a_door_at_a_walls_end_is_told_by_its_lintel(lintel):
     ]
     end = float(line.segments[-1, 1])
     assert end == pytest.approx(3.0, abs=0.1)
-    reach = line.doorway_beyond(end, 1)
+    reach = line.high_wall_beyond(end, 1)
     assert reach == (pytest.approx(0.9, abs=0.1) if lintel else 0.0)
-    assert line.doorway_beyond(float(line.segments[0, 0]), -1) == 0.0  # nothing seen there
+    assert line.high_wall_beyond(float(line.segments[0, 0]), -1) == 0.0  # nothing seen there
