@@ -14,7 +14,7 @@ benchmark's tune split. Chains resting on less evidence than those clouds had (R
 wrong about one in four against one in thirteen; clouds of under 15 000 points) fail in
 ways no placement term sees, so rooms of them get a second, linear map of that logit per
 kind, fitted on tune seeds of the frames and the other-scanners benchmarks. The other rooms
-share what is left in proportion to their shares.
+share what is left in proportion to their shares, none likelier than the main room.
 """
 
 from __future__ import annotations
@@ -147,18 +147,28 @@ def rank_assemblies(
     z = float(np.asarray(params.confidence_coefficients) @ inputs)
     z += _evidence_shift(pieces, z, params)
     confidence = 1.0 / (1.0 + math.exp(-z))
-    rest = max(1.0 - float(shares[main]), 1e-12)
     return [
         Assembly(
             firsts[g],
             int(members[g]),
             float(shares[g]),
-            confidence if g == main else float(shares[g]) * (1.0 - confidence) / rest,
+            confidence if g == main else _runner_up(shares, main, g, confidence),
             translations[g],
             polygons[g],
         )
         for g in order
     ]
+
+
+def _runner_up(shares: FloatArray, main: int, g: int, confidence: float) -> float:
+    """Probability of room g besides the main one: its share of what the main room leaves,
+    and never more than the main room's own probability times their shares' ratio. Where
+    the calibration doubts the main room more than its share says, the runners-up are no
+    surer for it: a room with a smaller share reported as likelier than the main one would
+    contradict the ranking (the rest is 'none of these')."""
+    rest = max(1.0 - float(shares[main]), 1e-12)
+    left = float(shares[g]) * (1.0 - confidence) / rest
+    return min(left, confidence * float(shares[g]) / max(float(shares[main]), 1e-12))
 
 
 def _evidence_shift(pieces: Sequence[Piece], z: float, params: PlacementParams) -> float:

@@ -128,17 +128,32 @@ def test_frames_map_the_main_logit_in_their_share_of_the_pieces(l_room):
     assert _main_logit(pieces, placement, identity, 4) == pytest.approx(clouds)
 
 
-def test_a_frames_room_leaves_its_lost_probability_to_the_others(l_room):
+def test_a_doubted_room_makes_its_runners_up_no_likelier_than_itself(l_room):
     pieces, placement, clouds = _ranked(l_room, [1.0, 9.5, 12.5, 20.0])
     frames = [dataclasses.replace(p, evidence="frame") for p in pieces]
     mapped = rank_assemblies(frames, placement, GEOMETRY)
     assert mapped[0].probability < clouds[0].probability  # the default map: frames doubt more
     assert [a.candidate for a in mapped] == [a.candidate for a in clouds]
-    # The other rooms keep their ratios and share what the main room lost.
-    ratio = mapped[1].probability / mapped[2].probability
-    assert ratio == pytest.approx(clouds[1].probability / clouds[2].probability)
-    assert mapped[1].probability > clouds[1].probability
+    # The rooms keep the ratios of their shares: what the calibration takes from the main
+    # room goes to 'none of these' (a wrong chain), not to a room the energy ranks lower.
+    for room, cloud in zip(mapped[1:], clouds[1:], strict=True):
+        ratio = room.probability / mapped[0].probability
+        assert ratio == pytest.approx(cloud.probability / clouds[0].probability)
+        assert room.probability < cloud.probability
     assert sum(a.probability for a in mapped) < 1.0
+
+
+def test_a_trusted_room_leaves_its_runners_up_what_it_does_not_claim(l_room):
+    pieces, placement, shares = _ranked(l_room, [1.0, 9.5, 12.5, 20.0])
+    sure = GEOMETRY.model_copy(update={"frame_calibration": (3.0, 1.0)})
+    frames = [dataclasses.replace(p, evidence="frame") for p in pieces]
+    mapped = rank_assemblies(frames, placement, sure)
+    assert mapped[0].probability > shares[0].probability
+    rest = 1.0 - shares[0].probability
+    for room, share in zip(mapped[1:], shares[1:], strict=True):
+        left = share.probability * (1.0 - mapped[0].probability) / rest
+        assert room.probability == pytest.approx(left)
+        assert room.probability <= mapped[0].probability
 
 
 def test_each_kind_of_evidence_has_its_own_map(l_room):
