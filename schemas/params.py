@@ -160,9 +160,11 @@ class PlacementParams(_Frozen):
         "are e^6 = 400 times less likely): the search prunes at that bound",
     )
     beam_width: int = Field(
-        300,
+        1000,
         ge=0,
-        description="partial loops a first, breadth-first pass keeps per loop position (0: none)",
+        description="partial loops a first, breadth-first pass keeps per loop position (0: "
+        "none; at most half the node budget in all): a true partial loop can rank a few "
+        "hundredth in the middle of the loop before its later junctions pay off",
     )
     max_search_nodes: int = Field(
         20_000,

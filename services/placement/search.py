@@ -749,8 +749,10 @@ def place_pieces(
         root = _root(search)
         if require_closed and params.beam_width > 0:
             # A beam over the loop positions finds good loops of many pieces early and
-            # evenly; the depth-first passes then prune against them.
-            _beam(search, root, params.beam_width)
+            # evenly; the depth-first passes then prune against them. It spends at most half
+            # the node budget, so that a site of many pieces still ends with closed loops.
+            width = min(params.beam_width, params.max_search_nodes // (2 * max(n - 1, 1)))
+            _beam(search, root, max(width, 1))
         # Iterative broadening: cheap passes that follow only the most promising children
         # spread good incumbents over the whole tree, so the full pass prunes early.
         for breadth in (*_BROADENING, None):

@@ -139,9 +139,11 @@ def _cut_with_priors(polygon, seed, n, noise):
 def test_priors_prune_the_search(l_room):
     # Each child's own prior cost enters its bound: with priors near the truth, children
     # far from their priors are cut before they are expanded.
+    # (Without the beam, which fills its width whatever the bounds until a loop closes.)
     pieces, hints = _cut_with_priors(l_room, 7, 7, noise=(0.3, 0.05))
-    blind = place_pieces(pieces, GEOMETRY)
-    guided = place_pieces(pieces, GEOMETRY, hints)
+    depth_first = GEOMETRY.model_copy(update={"beam_width": 0})
+    blind = place_pieces(pieces, depth_first)
+    guided = place_pieces(pieces, depth_first, hints)
     assert blind is not None and guided is not None
     assert blind.exhaustive and guided.exhaustive
     assert guided.best.order == tuple(f"p{k}" for k in range(7))
@@ -278,6 +280,16 @@ def test_node_budget_is_respected(budget):
     # The closed search keeps to its budget; the open fallback has a budget of its own.
     assert limited.nodes_searched <= budget + 1 + GEOMETRY.max_open_nodes + 1
     assert not limited.exhaustive
+
+
+def test_a_wide_beam_leaves_the_budget_room_to_close_the_loop():
+    # 12 pieces and a beam of 1000 per loop position would spend 11 000 nodes, more than
+    # the budget: the beam keeps to half of it and the search still returns closed loops.
+    pieces = _comb_pieces(12)
+    params = GEOMETRY.model_copy(update={"beam_width": 1000, "max_search_nodes": 4000})
+    placement = place_pieces(pieces, params)
+    assert placement is not None and placement.closed
+    assert placement.nodes_searched <= 4000 + 1
 
 
 def test_same_input_same_result():
