@@ -18,8 +18,10 @@ from services.types import Evidence, FloatArray, LocalLayout
 __all__ = [
     "SAMPLE_SPACING",
     "UNIT",
+    "Box",
     "FreeSpace",
     "Piece",
+    "box_of",
     "direction_index",
     "make_piece",
     "rot90",
@@ -50,6 +52,17 @@ def direction_index(v: FloatArray) -> int:
     if abs(v[0]) >= abs(v[1]):
         return 0 if v[0] > 0 else 2
     return 1 if v[1] > 0 else 3
+
+
+Box = tuple[float, float, float, float]  # (x_lo, y_lo, x_hi, y_hi)
+
+
+def box_of(points: FloatArray) -> Box:
+    """The bounds of (M, 2) points; an empty box (lo > hi) for none."""
+    if len(points) == 0:
+        return (np.inf, np.inf, -np.inf, -np.inf)
+    (x0, y0), (x1, y1) = points.min(axis=0).tolist(), points.max(axis=0).tolist()
+    return (x0, y0, x1, y1)
 
 
 def walls_of(points: FloatArray) -> FloatArray:
@@ -124,14 +137,13 @@ class FreeSpace:
 
     def hits(self, xy: FloatArray) -> int:
         """How many of the (M, 2) points (this grid's frame) fall in free cells."""
-        if len(xy) == 0:
+        if len(xy) == 0 or self.grid.size == 0:
             return 0
         ij = ((xy - self.origin) * (1.0 / self.cell)).astype(np.int64)
-        rows, cols = self.grid.shape
-        inside = (ij[:, 0] >= 0) & (ij[:, 1] >= 0) & (ij[:, 0] < rows) & (ij[:, 1] < cols)
-        # Points left of or below the origin truncate towards zero into row or column 0;
-        # the grid's border row and column are never free (the footprint has a cell margin).
-        return int(np.count_nonzero(self.grid[ij[inside, 0], ij[inside, 1]]))
+        # Points outside the grid clip onto its border rows and columns, which are never
+        # free (the footprint has a cell margin and erosion clears the border).
+        flat = np.ravel_multi_index((ij[:, 0], ij[:, 1]), self.grid.shape, mode="clip")
+        return int(np.count_nonzero(self.grid.ravel().take(flat)))
 
 
 @dataclass(frozen=True)
@@ -184,6 +196,11 @@ class Piece:
             pts = self.keypoints @ rot90(r).T
             out.append((pts, walls_of(pts), wall_samples(pts)))
         return tuple(out)
+
+    @cached_property
+    def sample_boxes(self) -> tuple[Box, ...]:
+        """Per quarter turn r: the box of the wall samples turned by r (see :func:`box_of`)."""
+        return tuple(box_of(samples) for _, _, samples in self.rotated)
 
     @cached_property
     def rotated_free(self) -> tuple[FreeSpace, ...]:

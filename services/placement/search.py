@@ -35,7 +35,7 @@ from services.placement.energy import (
     junction_displacement,
 )
 from services.placement.evidence import boundary_mismatch, end_voxels, register_ends
-from services.placement.pieces import SAMPLE_SPACING, Piece, rot90, shift_walls
+from services.placement.pieces import SAMPLE_SPACING, Box, Piece, rot90, shift_walls
 from services.placement.priors import (
     FrameEstimate,
     HintPair,
@@ -65,6 +65,7 @@ _SAME_PIECE = 1e6  # a piece never follows itself (unless it is the only one)
 _CLOSURE_DIRECTIONS = np.array(
     [d for t in (-1.0, -0.5, 0.0, 0.5) for d in ((1.0, t), (-1.0, -t), (-t, 1.0), (t, -1.0))]
 )
+_AWAY_FROM_START = -_CLOSURE_DIRECTIONS.T  # an end's distance from the start along each u
 _BROADENING = (1, 2, 3)  # children per node in the search's quick first passes
 _F = {name: k for k, name in enumerate(FEATURES)}
 
@@ -314,7 +315,7 @@ class _State:
     walls: FloatArray
     vertices: FloatArray
     samples: FloatArray  # (S, 2) site-frame wall samples of the placed pieces
-    box: tuple[float, float, float, float]  # their bounds (x_lo, y_lo, x_hi, y_hi)
+    box: Box  # their bounds (x_lo, y_lo, x_hi, y_hi)
     violated: tuple[int, ...] = ()  # indices of broken hint pairs
     resolved: frozenset[int] = frozenset()  # hint pairs already decided
     # The priors' costs per quarter turn q of the frame: the frame estimate takes its turn
@@ -332,16 +333,15 @@ def _crosses(new: FloatArray, placed: FloatArray) -> bool:
     """True when a new wall crosses or overlaps a placed one (touching is allowed)."""
     if len(placed) == 0 or len(new) == 0:
         return False
-    a = new[:, None, :]
-    b = placed[None, :, :]
-    perpendicular = a[..., 0] != b[..., 0]
-    inside_a = (b[..., 1] > a[..., 2] + _CROSS_EPS) & (b[..., 1] < a[..., 3] - _CROSS_EPS)
-    inside_b = (a[..., 1] > b[..., 2] + _CROSS_EPS) & (a[..., 1] < b[..., 3] - _CROSS_EPS)
-    overlap = np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 2], b[..., 2])
-    collinear = ~perpendicular & (np.abs(a[..., 1] - b[..., 1]) < 2 * _CROSS_EPS)
-    return bool(
-        np.any(perpendicular & inside_a & inside_b) or np.any(collinear & (overlap > _CROSS_EPS))
-    )
+    axis, offset, lo, hi = new.T[:, :, None]  # (W, 1) each, against (P,) placed
+    p_axis, p_offset, p_lo, p_hi = placed.T
+    # Perpendicular: each wall's line passes strictly inside the other's run.
+    crossing = (p_offset > lo + _CROSS_EPS) & (p_offset < hi - _CROSS_EPS)
+    crossing &= (offset > p_lo + _CROSS_EPS) & (offset < p_hi - _CROSS_EPS)
+    # Parallel: on one line, their runs overlapping by more than touching.
+    overlap = np.minimum(hi, p_hi) - np.maximum(lo, p_lo)
+    overlapping = (np.abs(offset - p_offset) < 2 * _CROSS_EPS) & (overlap > _CROSS_EPS)
+    return bool(np.where(axis == p_axis, overlapping, crossing).any())
 
 
 def _trim_start(walls: FloatArray, start: FloatArray, length: float) -> FloatArray:
@@ -363,7 +363,7 @@ def _conflict(
     j: int,
     rotation: int,
     samples: FloatArray,
-    box: tuple[float, float, float, float],
+    box: Box,
 ) -> float:
     """Meters of wall through space another scan saw empty, for piece j joining the state.
 
@@ -386,17 +386,7 @@ def _conflict(
     return hits * SAMPLE_SPACING
 
 
-def _box(points: FloatArray) -> tuple[float, float, float, float]:
-    """(x_lo, y_lo, x_hi, y_hi) of (M, 2) points; an empty box for none."""
-    if len(points) == 0:
-        return (np.inf, np.inf, -np.inf, -np.inf)
-    (x0, y0), (x1, y1) = points.min(axis=0).tolist(), points.max(axis=0).tolist()
-    return (x0, y0, x1, y1)
-
-
-def _union(
-    a: tuple[float, float, float, float], b: tuple[float, float, float, float]
-) -> tuple[float, float, float, float]:
+def _union(a: Box, b: Box) -> Box:
     return (min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3]))
 
 
@@ -447,7 +437,10 @@ def _extend(
     features[_F["turns"]] += turn != 0
     features[_F["structure"]] += search.structure[prev, j]
     features[_F["boundary"]] += search.boundary[prev, j]
-    box = _box(samples)
+    # Shifting every sample by the end shifts their bounds by it (rounding is monotone).
+    x0, y0, x1, y1 = piece.sample_boxes[rotation]
+    ex, ey = state.end.tolist()
+    box = (x0 + ex, y0 + ey, x1 + ex, y1 + ey)
     features[_F["conflict"]] += _conflict(search, state, j, rotation, samples, box)
     rotations_cost = state.rotation_prior + search.turned_rotation_cost[j, rotation]
     anchor = _anchor(search, j, state.end, drift_mean, drift_var)
@@ -602,10 +595,7 @@ def _bounds(
     # Cheapest way into each piece left and into the loop's start, from a piece that can
     # still precede it (the current last piece or another one left).
     sources = [state.order[-1], *rest]
-    costs = search.junction[sources][:, [*rest, 0]]
-    entry = costs.min(axis=0)
-    entry_of = np.zeros(len(pieces))
-    entry_of[rest] = entry[:-1]
+    entry = search.junction[sources][:, [*rest, 0]].min(axis=0)
     entry_total = float(entry.sum())
 
     # Rotation costs are all zero without priors: skip the reduction.
@@ -619,32 +609,37 @@ def _bounds(
     ends = state.end + search.chain_ends[js, rotations]
     reach = search.reach[rest].sum(axis=0)
     others = reach[None, :] - search.reach[js]
-    gaps = np.maximum(0.0, (-(ends @ _CLOSURE_DIRECTIONS.T) - others).max(axis=1))
+    gaps = np.maximum(0.0, (ends @ _AWAY_FROM_START - others).max(axis=1))
     junctions_left = len(rest) + 1
     shift = max(abs(noise.straight_mean), 2 * abs(noise.turn_mean))
-    slack = float(np.abs(state.mean).sum()) + junctions_left * shift
+    mx, my = state.mean.tolist()
+    slack = (abs(mx) + abs(my)) + junctions_left * shift
     worst = max(noise.straight_sigma**2, 2 * noise.turn_sigma**2) + 2 * noise.keypoint_sigma**2
-    total_var = float(state.var.sum()) + junctions_left * worst
+    var_x, var_y = state.var.tolist()
+    total_var = (var_x + var_y) + junctions_left * worst
     closure = 0.5 * np.maximum(0.0, gaps - slack) ** 2 / total_var
     # Every junction left adds the keypoint noise to both axes and at least a straight
     # junction's spread to one of them; log is concave, so the least sum of logs puts all
     # of the latter on one axis.
-    vx, vy = (state.var + junctions_left * noise.keypoint_sigma**2).tolist()
+    vx, vy = (
+        var_x + junctions_left * noise.keypoint_sigma**2,
+        var_y + junctions_left * noise.keypoint_sigma**2,
+    )
     spread = junctions_left * noise.straight_sigma**2
     closure += 0.5 * min(np.log(vx + spread) + np.log(vy), np.log(vx) + np.log(vy + spread))
     base = state.energy(weights) + weights[_F["hull"]] * 4 + weights[_F["prior"]] * rotation_floor
-    turns = np.array([turn for _, turn in options])
-    turn_cost = (turns != 0).astype(np.float64)
-    if search.require_closed:
-        turn_cost += np.abs(4 - turning - turns)  # turns still owed
+    turns = [turn for _, turn in options]
+    closing = search.require_closed  # then the turns still owed cost too
+    turn_cost = np.array([(t != 0) + (abs(4 - turning - t) if closing else 0) for t in turns])
     # The junction into j replaces the cheapest way into j counted in entry_total.
+    place = {piece: k for k, piece in enumerate(rest)}
     bounds = base + weights[_F["turns"]] * turn_cost
-    bounds += search.junction[state.order[-1], js] + entry_total - entry_of[js]
+    bounds += search.junction[state.order[-1], js] + entry_total - entry[[place[j] for j in js]]
     positions = None
     if search.frame is not None:
         # The child's own prior is known exactly: it replaces the state's and the floor
         # counted for j's rotation.
-        own, positions = _child_priors(search, state, js, rotations, turns)
+        own, positions = _child_priors(search, state, js, rotations, np.array(turns))
         floor_of_j = search.rotation_cost[js].min(axis=1)
         bounds += weights[_F["prior"]] * (own - state.features[_F["prior"]] - floor_of_j)
     if search.require_closed:
@@ -709,7 +704,7 @@ def _root(search: _Search) -> _State:
         walls=trimmed,
         vertices=pts.copy(),
         samples=samples,
-        box=_box(samples),
+        box=first.sample_boxes[0],
         rotation_prior=rotation_prior,
         anchors=tuple(
             a for a in (_anchor(search, 0, np.zeros(2), np.zeros(2), np.zeros(2)),) if a is not None

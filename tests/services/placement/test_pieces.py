@@ -7,6 +7,7 @@ import pytest
 
 from services.placement.pieces import (
     FreeSpace,
+    box_of,
     direction_index,
     make_piece,
     rot90,
@@ -218,6 +219,21 @@ def test_a_block_of_seen_floor_keeps_its_core():
     assert free.hits(core[None]) == 1
     rim = np.array([[3.02, 3.1], [4.18, 3.1], [3.6, 2.52], [3.6, 3.68]]) - CHAIN[0]
     assert free.hits(rim) == 0
+
+
+@pytest.mark.parametrize("turn", range(4))
+def test_sample_boxes_bound_the_turned_samples(turn):
+    piece = _room_piece()
+    samples = piece.rotated[turn][2]
+    x_lo, y_lo, x_hi, y_hi = piece.sample_boxes[turn]
+    assert (x_lo, y_lo) == tuple(samples.min(axis=0)) and (x_hi, y_hi) == tuple(samples.max(axis=0))
+    assert box_of(np.zeros((0, 2))) == (np.inf, np.inf, -np.inf, -np.inf)
+
+
+def test_free_space_of_no_footprint_hits_nothing():
+    free = make_piece("f", _layout(footprint=np.zeros((0, 2)))).free
+    assert free.grid.size == 0
+    assert free.hits(np.array([[1.0, 1.0], [-3.0, 2.0]])) == 0
 
 
 @pytest.mark.parametrize("turn", range(4))

@@ -526,6 +526,31 @@ def test_crossing_walls_are_rejected(l_room):
     assert evaluate_placement(pieces, ["p0", "p3", "p2", "p1"], [0, 0, 0, 0], GEOMETRY) is None
 
 
+# Walls as (axis, offset, lo, hi): axis 0 runs along x at y = offset, axis 1 along y.
+HORIZONTAL = np.array([[0.0, 0.0, 0.0, 4.0]])
+
+
+@pytest.mark.parametrize(
+    ("wall", "crosses"),
+    [
+        ([1.0, 2.0, -1.0, 1.0], True),  # through the middle
+        ([1.0, 4.0, 0.0, 3.0], False),  # a corner: touching at the end
+        ([1.0, 2.0, 0.0, 3.0], False),  # a T: touching at its own end
+        ([1.0, 2.0, 0.03, 3.0], False),  # within the 5 cm a touch may miss by
+        ([1.0, 2.0, -0.2, 3.0], True),  # past it
+        ([0.0, 0.02, 3.0, 6.0], True),  # on the same line, overlapping by 1 m
+        ([0.0, 0.0, 3.97, 6.0], False),  # on the same line, touching end to end
+        ([0.0, 0.2, 1.0, 3.0], False),  # parallel, 20 cm apart
+    ],
+)
+def test_walls_cross_only_where_they_pass_through_each_other(wall, crosses):
+    new = np.array([wall])
+    assert search_module._crosses(new, HORIZONTAL) is crosses
+    assert search_module._crosses(HORIZONTAL, new) is crosses
+    far = new + np.array([0.0, 50.0, 0.0, 0.0])  # another wall, far away, changes nothing
+    assert search_module._crosses(np.vstack([new, far]), HORIZONTAL) is crosses
+
+
 def test_evaluate_placement_agrees_with_the_search(l_room):
     pieces = chains_from_polygon(l_room, TIED_CUTS, [0, 1, 2, 3])
     placement = place_pieces(pieces, GEOMETRY)
