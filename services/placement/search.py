@@ -8,7 +8,8 @@ up to one full turn; walls may not cross or overlap. A child's lower bound adds 
 junction costs, the cheapest way into every piece still to place, the turns still owed and
 the closure gap the remaining pieces cannot make up. Quick first passes that expand only
 the best one, two, three children per node (iterative broadening) find good loops early, so
-the full pass prunes tight.
+the full pass prunes tight. Bounds are computed for many states at once (a beam layer, or a
+few siblings placed together), since a node's cost is mostly numpy's per-call overhead.
 
 The search keeps the ``top_k`` best assemblies, and its budget is a number of nodes, never a
 time: the same input gives the same answer on any machine.
@@ -67,6 +68,7 @@ _CLOSURE_DIRECTIONS = np.array(
 )
 _AWAY_FROM_START = -_CLOSURE_DIRECTIONS.T  # an end's distance from the start along each u
 _BROADENING = (1, 2, 3)  # children per node in the search's quick first passes
+_DFS_GROUP = 8  # children the depth-first search places at once (see _dfs)
 _F = {name: k for k, name in enumerate(FEATURES)}
 
 
@@ -132,8 +134,13 @@ class _Search:
     rotation_cost: FloatArray = field(init=False)  # [j, r]: prior cost of rotation r
     # [j, r, q]: that cost with the frame turned q more quarter turns (see _State.anchors)
     turned_rotation_cost: FloatArray = field(init=False)
+    rotation_floor: FloatArray = field(init=False)  # [j]: least prior cost of j's rotations
     reach: FloatArray = field(init=False)  # [j, d]: piece j's reach along direction d
     chain_ends: FloatArray = field(init=False)  # [j, r]: piece j's target at rotation r
+    # [j]: piece j's quarter turns along its chain, directions of its first and last walls.
+    turning: NDArray[np.intp] = field(init=False)
+    first_direction: NDArray[np.intp] = field(init=False)
+    last_direction: NDArray[np.intp] = field(init=False)
     # (4, 4, 2, 2) [heading in, heading out]: mean (2,) and variance (2,) of a junction's
     # displacement.
     step: FloatArray = field(init=False)
@@ -162,6 +169,10 @@ class _Search:
         self.rotation_cost = _rotation_costs(self.pieces, self.hints, self.frame)
         quarters = (np.arange(4)[:, None] + np.arange(4)[None, :]) % 4  # [r, q] -> r + q
         self.turned_rotation_cost = self.rotation_cost[:, quarters]
+        self.rotation_floor = self.rotation_cost.min(axis=1)
+        self.turning = np.array([p.turning for p in self.pieces], dtype=np.intp)
+        self.first_direction = np.array([p.directions[0] for p in self.pieces], dtype=np.intp)
+        self.last_direction = np.array([p.directions[-1] for p in self.pieces], dtype=np.intp)
         self.step = np.array(
             [
                 [junction_displacement(self.noise, h_in, h_out) for h_out in range(4)]
@@ -420,7 +431,7 @@ def _extend(
 ) -> _State | None:
     """The state with piece j appended after a junction that turns by ``turn``, or None
     when its walls would cross the placed ones. ``position``: the child's position costs
-    when already known (:func:`_bounds`)."""
+    when already known (:func:`_children`)."""
     piece = search.pieces[j]
     rotation = (state.heading + turn - piece.directions[0]) % 4
     local_pts, local_walls, local_samples = piece.rotated[rotation]
@@ -509,13 +520,19 @@ def _close(search: _Search, state: _State) -> None:
     search.record(PlacementCandidate(energy, ids, state.rotations, named, missing, pairs))
 
 
-def _dfs(search: _Search, state: _State, remaining: tuple[int, ...]) -> None:
+def _dfs(
+    search: _Search,
+    state: _State,
+    remaining: tuple[int, ...],
+    children: _Children | None = None,
+) -> None:
     """Expand ``state``: children in order of their lower bound (the least energy any leaf
-    below them can have, :func:`_bounds`), cut where that reaches the search's threshold
+    below them can have, :func:`_children`), cut where that reaches the search's threshold
     (the energy a new leaf must beat, :meth:`_Search.threshold`). Only a child that is
     visited pays for its geometry (crossing and free-space tests). A state is a partial
     loop: the pieces placed in order with their quarter turns and where its end lies;
-    ``remaining`` holds the indices of the pieces still to place."""
+    ``remaining`` holds the indices of the pieces still to place; ``children``: the
+    state's children when already bounded."""
     search.nodes += 1
     if not remaining or not search.require_closed:
         # An open search also keeps partial chains: the best one is placed when no
@@ -523,21 +540,49 @@ def _dfs(search: _Search, state: _State, remaining: tuple[int, ...]) -> None:
         _close(search, state)
         if not remaining:
             return
-    options = _options(search, state, remaining)
-    if not options:
-        return
-    bounds, positions = _bounds(search, state, remaining, options)
-    ranked = sorted(zip(bounds, options, range(len(options)), strict=True))
+    if children is None:
+        children = _children(search, [state])
+    queue = np.lexsort((children.turn, children.piece, children.bound)).tolist()
+    bounds, pieces = children.bound.tolist(), children.piece.tolist()
     expanded = 0
-    for lower_bound, (j, turn), k in ranked:
-        if lower_bound >= search.threshold() or search.out_of_budget():
-            return
-        child = _extend(search, state, j, turn, None if positions is None else positions[k])
-        if child is not None:
-            _dfs(search, child, tuple(i for i in remaining if i != j))
+    while queue:
+        # The next few children under the threshold are placed together, so that their own
+        # children are bounded in one batch; each is checked again before it is expanded.
+        wanted = _DFS_GROUP if search.breadth is None else search.breadth - expanded
+        group, queue, cut = _place_group(search, state, children, queue, min(wanted, _DFS_GROUP))
+        batch = None
+        if group and len(remaining) > 1:
+            batch = _children(search, [child for _, child in group])
+        for g, (c, child) in enumerate(group):
+            if bounds[c] >= search.threshold() or search.out_of_budget():
+                return
+            rest = tuple(i for i in remaining if i != pieces[c])
+            _dfs(search, child, rest, None if batch is None else batch.of(g))
             expanded += 1
             if search.breadth is not None and expanded >= search.breadth:
                 return
+        if cut:
+            return
+
+
+def _place_group(
+    search: _Search, state: _State, children: _Children, queue: list[int], size: int
+) -> tuple[list[tuple[int, _State]], list[int], bool]:
+    """Place the next ``size`` children of ``queue`` (indices into ``children``) whose
+    walls cross nothing, while their bounds are under the threshold and the budget lasts.
+    Returns those children (index, state), the rest of the queue, and whether the
+    threshold or the budget cut it."""
+    group: list[tuple[int, _State]] = []
+    for taken, c in enumerate(queue):
+        if len(group) == size:
+            return group, queue[taken:], False
+        if children.bound[c] >= search.threshold() or search.out_of_budget():
+            return group, queue[taken:], True
+        position = None if children.position is None else children.position[c]
+        child = _extend(search, state, int(children.piece[c]), int(children.turn[c]), position)
+        if child is not None:
+            group.append((c, child))
+    return group, [], False
 
 
 def _beam(search: _Search, root: _State, width: int) -> None:
@@ -546,118 +591,166 @@ def _beam(search: _Search, root: _State, width: int) -> None:
     Children that reach the same pieces, last piece, heading and end (to 10 cm) are one:
     the beam keeps different partial loops, not copies of one.
     """
-    n = len(search.pieces)
     layer = [root]
-    for _ in range(1, n):
-        scored: list[tuple[float, int, int, int, int]] = []
-        known: list[FloatArray | None] = []  # per parent: its children's position costs
-        for k, state in enumerate(layer):
-            placed = set(state.order)
-            remaining = tuple(i for i in range(1, n) if i not in placed)
-            options = _options(search, state, remaining)
-            bounds, positions = _bounds(search, state, remaining, options)
-            known.append(positions)
-            scored += [
-                (b, k, j, turn, c)
-                for c, (b, (j, turn)) in enumerate(zip(bounds, options, strict=True))
-            ]
-        scored.sort()
-        parents, layer = layer, []
+    for _ in range(1, len(search.pieces)):
+        children = _children(search, layer)
+        ranked = np.lexsort((children.turn, children.piece, children.parent, children.bound))
+        bounds, parents = children.bound.tolist(), children.parent.tolist()
+        pieces, turns = children.piece.tolist(), children.turn.tolist()
+        headings = children.heading.tolist()
+        ends = np.round(children.end, 1).tolist()
+        states, layer = layer, []
         seen: set[tuple[object, ...]] = set()
-        for bound, k, j, turn, c in scored:
-            if len(layer) >= width or bound >= search.threshold() or search.out_of_budget():
+        for c in ranked.tolist():
+            if len(layer) >= width or bounds[c] >= search.threshold() or search.out_of_budget():
                 break
             search.nodes += 1
-            positions = known[k]
-            position = None if positions is None else positions[c]
-            child = _extend(search, parents[k], j, turn, position)
-            if child is None:
-                continue
-            end = np.round(child.end, 1).tolist()
-            key = (frozenset(child.order), child.order[-1], child.heading, *end)
-            if key not in seen:
+            state, j = states[parents[c]], pieces[c]
+            key = (frozenset((*state.order, j)), j, headings[c], *ends[c])
+            if key in seen:
+                continue  # known before paying for its geometry
+            position = None if children.position is None else children.position[c]
+            child = _extend(search, state, j, turns[c], position)
+            if child is not None:
                 seen.add(key)
                 layer.append(child)
     for state in layer:
         _close(search, state)
 
 
-def _bounds(
-    search: _Search, state: _State, remaining: tuple[int, ...], options: list[tuple[int, int]]
-) -> tuple[list[float], FloatArray | None]:
-    """Lower bound of the energy of every leaf below each child (piece, turn), and with
-    priors each child's position costs ((C, 4), see :func:`_child_priors`)."""
-    if not options:
-        return [], None
+@dataclass(frozen=True)
+class _Children:
+    """The children of a batch of states: child c appends piece[c] to the state parent[c]
+    after a junction that turns by turn[c]; arrays of shape (C,) unless noted."""
+
+    parent: NDArray[np.intp]
+    piece: NDArray[np.intp]
+    turn: NDArray[np.intp]
+    rotation: NDArray[np.intp]  # the piece's quarter turns
+    heading: NDArray[np.intp]  # of the piece's last wall
+    end: FloatArray  # (C, 2) the piece's target
+    bound: FloatArray  # the least energy any leaf below the child can have
+    position: FloatArray | None  # with priors: (C, 4) position costs (see _child_priors)
+
+    def of(self, k: int) -> _Children:
+        """The children of the batch's k-th state, as a batch of its own."""
+        lo, hi = np.searchsorted(self.parent, [k, k + 1]).tolist()
+        return _Children(
+            self.parent[lo:hi] - k,
+            self.piece[lo:hi],
+            self.turn[lo:hi],
+            self.rotation[lo:hi],
+            self.heading[lo:hi],
+            self.end[lo:hi],
+            self.bound[lo:hi],
+            None if self.position is None else self.position[lo:hi],
+        )
+
+
+def _children(search: _Search, states: Sequence[_State]) -> _Children:
+    """Every child a closed loop's turning number allows (a piece not placed yet, after a
+    junction that continues or turns), with its lower bound, for a batch of states."""
     pieces, weights, noise = search.pieces, search.weights, search.noise
-    rest = list(remaining)
-    turning = state.turning + sum(pieces[i].turning for i in rest)
+    n, count = len(pieces), len(states)
+    remaining = np.ones((count, n), dtype=bool)
+    remaining[:, 0] = False
+    for k, state in enumerate(states):
+        remaining[k, list(state.order)] = False
+    # Per state: heading, turning so far, last piece, pieces left; end, drift mean and
+    # variance, energy so far.
+    facts = np.array(
+        [(s.heading, s.turning, s.order[-1], n - len(s.order)) for s in states], dtype=np.intp
+    ).reshape(-1, 4)
+    heading, turning, last, left = facts.T
+    values = np.array(
+        [[*s.end.tolist(), *s.mean.tolist(), *s.var.tolist(), s.energy(weights)] for s in states]
+    ).reshape(-1, 7)
+    ends, mean, var, energy = values[:, 0:2], values[:, 2:4], values[:, 4:6], values[:, 6]
+    turning = turning + (remaining @ search.turning).astype(np.intp)  # with the pieces left
+    turn_options = np.array(_TURNS)
+    if search.require_closed:
+        # The loop's turns add up to +4; the junctions after this one give +-1 each.
+        turn_allowed = np.abs(4 - turning[:, None] - turn_options) <= left[:, None]
+        allowed = remaining[:, :, None] & turn_allowed[:, None, :]
+    else:
+        allowed = np.repeat(remaining[:, :, None], len(_TURNS), axis=2)
+    parent, piece, option = np.nonzero(allowed)
+    turn = turn_options[option]
+    rotation = (heading[parent] + turn - search.first_direction[piece]) % 4
+    child_end = ends[parent] + search.chain_ends[piece, rotation]
+    child_heading = (search.last_direction[piece] + rotation) % 4
+
     # Cheapest way into each piece left and into the loop's start, from a piece that can
     # still precede it (the current last piece or another one left).
-    sources = [state.order[-1], *rest]
-    entry = search.junction[sources][:, [*rest, 0]].min(axis=0)
-    entry_total = float(entry.sum())
-
+    sources = remaining.copy()
+    sources[np.arange(count), last] = True
+    into = np.where(sources[:, :, None], search.junction[None], np.inf).min(axis=1)
+    targets = remaining.copy()
+    targets[:, 0] = True
+    entry_total = np.where(targets, into, 0.0).sum(axis=1)
     # Rotation costs are all zero without priors: skip the reduction.
     rotation_floor = (
-        float(search.rotation_cost[rest].min(axis=1).sum()) if search.frame is not None else 0.0
+        np.where(remaining, search.rotation_floor, 0.0).sum(axis=1)
+        if search.frame is not None
+        else np.zeros(count)
     )
+
     # Closure: the gap the pieces left cannot make up (L1, by duality), against the largest
     # variance the remaining junctions could add (Cauchy-Schwarz: |r|_1^2 <= sum r^2/v sum v).
-    js = [j for j, _ in options]
-    rotations = [(state.heading + turn - pieces[j].directions[0]) % 4 for j, turn in options]
-    ends = state.end + search.chain_ends[js, rotations]
-    reach = search.reach[rest].sum(axis=0)
-    others = reach[None, :] - search.reach[js]
-    gaps = np.maximum(0.0, (ends @ _AWAY_FROM_START - others).max(axis=1))
-    junctions_left = len(rest) + 1
+    reach = np.where(remaining[:, :, None], search.reach[None], 0.0).sum(axis=1)
+    others = reach[parent] - search.reach[piece]
+    gaps = np.maximum(0.0, (child_end @ _AWAY_FROM_START - others).max(axis=1))
+    junctions_left = left + 1
     shift = max(abs(noise.straight_mean), 2 * abs(noise.turn_mean))
-    mx, my = state.mean.tolist()
-    slack = (abs(mx) + abs(my)) + junctions_left * shift
+    slack = np.abs(mean).sum(axis=1) + junctions_left * shift
     worst = max(noise.straight_sigma**2, 2 * noise.turn_sigma**2) + 2 * noise.keypoint_sigma**2
-    var_x, var_y = state.var.tolist()
-    total_var = (var_x + var_y) + junctions_left * worst
-    closure = 0.5 * np.maximum(0.0, gaps - slack) ** 2 / total_var
+    total_var = var.sum(axis=1) + junctions_left * worst
+    closure = 0.5 * np.maximum(0.0, gaps - slack[parent]) ** 2 / total_var[parent]
     # Every junction left adds the keypoint noise to both axes and at least a straight
     # junction's spread to one of them; log is concave, so the least sum of logs puts all
     # of the latter on one axis.
-    vx, vy = (
-        var_x + junctions_left * noise.keypoint_sigma**2,
-        var_y + junctions_left * noise.keypoint_sigma**2,
-    )
+    vx = var[:, 0] + junctions_left * noise.keypoint_sigma**2
+    vy = var[:, 1] + junctions_left * noise.keypoint_sigma**2
     spread = junctions_left * noise.straight_sigma**2
-    closure += 0.5 * min(np.log(vx + spread) + np.log(vy), np.log(vx) + np.log(vy + spread))
-    base = state.energy(weights) + weights[_F["hull"]] * 4 + weights[_F["prior"]] * rotation_floor
-    turns = [turn for _, turn in options]
-    closing = search.require_closed  # then the turns still owed cost too
-    turn_cost = np.array([(t != 0) + (abs(4 - turning - t) if closing else 0) for t in turns])
-    # The junction into j replaces the cheapest way into j counted in entry_total.
-    place = {piece: k for k, piece in enumerate(rest)}
-    bounds = base + weights[_F["turns"]] * turn_cost
-    bounds += search.junction[state.order[-1], js] + entry_total - entry[[place[j] for j in js]]
-    positions = None
+    spread_cost = np.minimum(np.log(vx + spread) + np.log(vy), np.log(vx) + np.log(vy + spread))
+    closure += 0.5 * spread_cost[parent]
+
+    base = energy + weights[_F["hull"]] * 4 + weights[_F["prior"]] * rotation_floor
+    turn_cost = (turn != 0).astype(np.float64)
+    if search.require_closed:
+        turn_cost += np.abs(4 - turning[parent] - turn)  # turns still owed
+    # The junction into the piece replaces the cheapest way into it counted in entry_total.
+    bound = base[parent] + weights[_F["turns"]] * turn_cost
+    bound += search.junction[last[parent], piece] + entry_total[parent] - into[parent, piece]
+    position = None
     if search.frame is not None:
         # The child's own prior is known exactly: it replaces the state's and the floor
-        # counted for j's rotation.
-        own, positions = _child_priors(search, state, js, rotations, np.array(turns))
-        floor_of_j = search.rotation_cost[js].min(axis=1)
-        bounds += weights[_F["prior"]] * (own - state.features[_F["prior"]] - floor_of_j)
+        # counted for its piece's rotation.
+        position = np.zeros((len(piece), 4))
+        starts = np.searchsorted(parent, np.arange(count + 1))
+        for k, state in enumerate(states):
+            at = slice(starts[k], starts[k + 1])
+            own, position[at] = _child_priors(search, state, piece[at], rotation[at], turn[at])
+            floor_of_piece = search.rotation_floor[piece[at]]
+            bound[at] += weights[_F["prior"]] * (own - state.features[_F["prior"]] - floor_of_piece)
     if search.require_closed:
-        bounds += weights[_F["closure"]] * closure
-    out: list[float] = bounds.tolist()
-    return out, positions
+        bound += weights[_F["closure"]] * closure
+    return _Children(parent, piece, turn, rotation, child_heading, child_end, bound, position)
 
 
 def _child_priors(
-    search: _Search, state: _State, js: list[int], rotations: list[int], turns: NDArray[np.intp]
+    search: _Search,
+    state: _State,
+    pieces: NDArray[np.intp],
+    rotations: NDArray[np.intp],
+    turns: NDArray[np.intp],
 ) -> tuple[FloatArray, FloatArray]:
-    """The prior feature of each child (piece js[c] at rotations[c] after a junction that
-    turns by turns[c], its source at the state's end), as :func:`_extend` computes it:
+    """The prior feature of each child (piece pieces[c] at rotations[c] after a junction
+    that turns by turns[c], its source at the state's end), as :func:`_extend` computes it:
     rotation costs and position costs (see :func:`_anchor`), the least over the frame's
     quarter turns; and the position costs per quarter turn (C, 4)."""
-    pieces = np.asarray(js)
     costs = state.rotation_prior[None, :] + search.turned_rotation_cost[pieces, rotations]
-    position = np.tile(state.position, (len(js), 1))
+    position = np.tile(state.position, (len(pieces), 1))
     with_prior = np.flatnonzero(search.has_prior[pieces])
     if len(with_prior) and state.anchors:
         chosen = pieces[with_prior]
@@ -668,19 +761,6 @@ def _child_priors(
         placed = np.broadcast_to(np.asarray(state.anchors), (len(chosen), len(state.anchors), 5))
         position[with_prior] = position_costs_batch(np.concatenate([placed, new[:, None]], 1))
     return (costs + position).min(axis=1), position
-
-
-def _options(search: _Search, state: _State, remaining: tuple[int, ...]) -> list[tuple[int, int]]:
-    """(piece, junction turn) pairs allowed next by the turning number of a closed loop."""
-    k = len(remaining)
-    fixed = state.turning + sum(search.pieces[i].turning for i in remaining)
-    return [
-        (j, turn)
-        for j in remaining
-        for turn in _TURNS
-        # The loop's turns add up to +4; the k junctions after this one give +-1 each.
-        if not search.require_closed or abs(4 - fixed - turn) <= k
-    ]
 
 
 def _root(search: _Search) -> _State:

@@ -155,23 +155,26 @@ def test_a_childs_bound_holds_its_own_prior_exactly(l_room):
     # the bound is as tight as it can be and still never above a leaf below it.
     pieces, hints = _cut_with_priors(l_room, 3, 6, noise=(0.8, 0.2))
     search = search_module._Search(pieces, GEOMETRY, hints, True)
-    state, remaining = search_module._root(search), tuple(range(1, len(pieces)))
+    state = search_module._root(search)
     prior = search_module._F["prior"]
     for _ in range(3):
-        options = search_module._options(search, state, remaining)
-        js = [j for j, _ in options]
-        rotations = [(state.heading + t - pieces[j].directions[0]) % 4 for j, t in options]
-        turns = np.array([t for _, t in options])
-        own, positions = search_module._child_priors(search, state, js, rotations, turns)
-        extended = [search_module._extend(search, state, j, t) for j, t in options]
+        children = search_module._children(search, [state])
+        js, turns = children.piece, children.turn
+        own, positions = search_module._child_priors(search, state, js, children.rotation, turns)
+        assert children.position is not None and np.array_equal(positions, children.position)
+        extended = [
+            search_module._extend(search, state, j, t)
+            for j, t in zip(js.tolist(), turns.tolist(), strict=True)
+        ]
         valid = {k: child for k, child in enumerate(extended) if child is not None}
         assert valid
         for k, child in valid.items():
             assert own[k] == pytest.approx(child.features[prior], abs=1e-9)
             assert positions[k] == pytest.approx(child.position, abs=1e-9)
-        best = min(valid, key=lambda k: own[k])
-        state = valid[best]
-        remaining = tuple(i for i in remaining if i != options[best][0])
+            assert children.end[k] == pytest.approx(child.end, abs=1e-12)
+            assert children.heading[k] == child.heading
+            assert children.rotation[k] == child.rotations[-1]
+        state = valid[min(valid, key=lambda k: own[k])]
     assert state.features[prior] > 0.0
 
 
@@ -268,6 +271,38 @@ def _comb_pieces(n: int) -> list[Piece]:
     perimeter = 44.0
     cuts = sorted((np.arange(n) * perimeter / n + rng.uniform(0.0, 1.0, n)).tolist())
     return chains_from_polygon(COMB, cuts, rng.integers(0, 4, n).tolist())
+
+
+@pytest.mark.parametrize("with_priors", [False, True])
+def test_placing_siblings_together_changes_no_step_of_the_search(monkeypatch, l_room, with_priors):
+    # The depth-first search places a few siblings at once to bound their children in one
+    # batch; it still expands the same nodes in the same order as one sibling at a time.
+    pieces, hints = _cut_with_priors(l_room, 5, 7, noise=(0.5, 0.1))
+    hints = hints if with_priors else None
+    runs = {}
+    for group in (1, 3, 8):
+        monkeypatch.setattr(search_module, "_DFS_GROUP", group)
+        runs[group] = place_pieces(pieces, GEOMETRY, hints)
+    first = runs[1]
+    assert first is not None
+    for placement in runs.values():
+        assert placement is not None
+        assert placement.nodes_searched == first.nodes_searched
+        assert placement.candidates == first.candidates
+
+
+def test_a_batchs_children_split_by_state(l_room):
+    pieces, _ = _cut_with_priors(l_room, 5, 6, noise=(0.0, 0.0))
+    search = search_module._Search(pieces, GEOMETRY, SiteHints(), True)
+    root = search_module._root(search)
+    states = [c for c in (search_module._extend(search, root, j, 1) for j in (1, 2, 3)) if c]
+    batch = search_module._children(search, states)
+    for k, state in enumerate(states):
+        alone, part = search_module._children(search, [state]), batch.of(k)
+        assert np.array_equal(part.piece, alone.piece) and np.array_equal(part.turn, alone.turn)
+        assert np.all(part.parent == 0)
+        assert part.bound == pytest.approx(alone.bound, abs=1e-12)
+        assert part.end == pytest.approx(alone.end, abs=1e-12)
 
 
 @pytest.mark.parametrize("budget", [1, 7, 50])
