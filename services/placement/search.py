@@ -296,7 +296,7 @@ def _anchor_rows(
     drift_var: FloatArray,
 ) -> FloatArray:
     """(m, 5) anchors (prior source, placed source turned into the hints frame, 1 / variance)
-    of pieces ``js``, each with a prior, whose source lies at ``source`` (2,).
+    of pieces ``js``, each with a prior, whose sources lie at ``source`` ((2,) or (m, 2)).
 
     ``source`` is where the end-to-end concatenation puts it; the junctions on the way
     hide displacements (overlaps, gaps) that add up to ``drift_mean`` and ``drift_var``
@@ -307,7 +307,7 @@ def _anchor_rows(
     c, s = np.cos(frame.yaw), np.sin(frame.yaw)
     turned = (source + drift_mean) @ np.array([[c, -s], [s, c]]).T
     # The frame's yaw is uncertain: the further from the first piece, the more it moves.
-    variance = search.prior_variance[js] + float(source @ source) * frame.variance
+    variance = search.prior_variance[js] + np.sum(source * source, axis=-1) * frame.variance
     variance = variance + drift_var.mean(axis=1)  # isotropic: the drift's axes turn
     return np.column_stack([search.prior_source[js], turned, 1.0 / variance])
 
@@ -726,13 +726,10 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
     if search.frame is not None:
         # The child's own prior is known exactly: it replaces the state's and the floor
         # counted for its piece's rotation.
-        position = np.zeros((len(piece), 4))
-        starts = np.searchsorted(parent, np.arange(count + 1))
-        for k, state in enumerate(states):
-            at = slice(starts[k], starts[k + 1])
-            own, position[at] = _child_priors(search, state, piece[at], rotation[at], turn[at])
-            floor_of_piece = search.rotation_floor[piece[at]]
-            bound[at] += weights[_F["prior"]] * (own - state.features[_F["prior"]] - floor_of_piece)
+        own, position = _child_priors(search, states, parent, piece, rotation, turn)
+        prior_so_far = np.array([s.features[_F["prior"]] for s in states])
+        floor_of_piece = search.rotation_floor[piece]
+        bound += weights[_F["prior"]] * (own - prior_so_far[parent] - floor_of_piece)
     if search.require_closed:
         bound += weights[_F["closure"]] * closure
     return _Children(parent, piece, turn, rotation, child_heading, child_end, bound, position)
@@ -740,26 +737,36 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
 
 def _child_priors(
     search: _Search,
-    state: _State,
-    pieces: NDArray[np.intp],
-    rotations: NDArray[np.intp],
-    turns: NDArray[np.intp],
+    states: Sequence[_State],
+    parent: NDArray[np.intp],
+    piece: NDArray[np.intp],
+    rotation: NDArray[np.intp],
+    turn: NDArray[np.intp],
 ) -> tuple[FloatArray, FloatArray]:
-    """The prior feature of each child (piece pieces[c] at rotations[c] after a junction
-    that turns by turns[c], its source at the state's end), as :func:`_extend` computes it:
-    rotation costs and position costs (see :func:`_anchor`), the least over the frame's
+    """The prior feature of each child (piece[c] at rotation[c] after a junction that turns
+    by turn[c], its source at the end of states[parent[c]]), as :func:`_extend` computes
+    it: rotation costs and position costs (see :func:`_anchor`), the least over the frame's
     quarter turns; and the position costs per quarter turn (C, 4)."""
-    costs = state.rotation_prior[None, :] + search.turned_rotation_cost[pieces, rotations]
-    position = np.tile(state.position, (len(pieces), 1))
-    with_prior = np.flatnonzero(search.has_prior[pieces])
-    if len(with_prior) and state.anchors:
-        chosen = pieces[with_prior]
-        headings = (state.heading + turns[with_prior]) % 4  # each child's first wall
-        steps = search.step[state.heading, headings]
-        drift_mean, drift_var = state.mean + steps[:, 0], state.var + steps[:, 1]
-        new = _anchor_rows(search, chosen, state.end, drift_mean, drift_var)
-        placed = np.broadcast_to(np.asarray(state.anchors), (len(chosen), len(state.anchors), 5))
-        position[with_prior] = position_costs_batch(np.concatenate([placed, new[:, None]], 1))
+    rotation_prior = np.array([s.rotation_prior for s in states]).reshape(-1, 4)
+    costs = rotation_prior[parent] + search.turned_rotation_cost[piece, rotation]
+    position = np.array([s.position for s in states]).reshape(-1, 4)[parent]
+    anchored = np.array([len(s.anchors) for s in states], dtype=np.intp)
+    chosen = np.flatnonzero(search.has_prior[piece] & (anchored[parent] > 0))
+    if len(chosen):
+        # Every child's anchors in one (m, k + 1, 5) batch: a state's own anchors, rows of
+        # zero weight (which cost nothing and move no fit) up to the most any state has,
+        # then the child's.
+        placed = np.zeros((len(states), int(anchored.max()), 5))
+        for k, state in enumerate(states):
+            placed[k, : len(state.anchors)] = state.anchors
+        of = parent[chosen]
+        heading = np.array([s.heading for s in states], dtype=np.intp)[of]
+        steps = search.step[heading, (heading + turn[chosen]) % 4]  # into each child's 1st wall
+        mean = np.array([s.mean for s in states]).reshape(-1, 2)[of] + steps[:, 0]
+        var = np.array([s.var for s in states]).reshape(-1, 2)[of] + steps[:, 1]
+        ends = np.array([s.end for s in states]).reshape(-1, 2)[of]
+        new = _anchor_rows(search, piece[chosen], ends, mean, var)
+        position[chosen] = position_costs_batch(np.concatenate([placed[of], new[:, None]], 1))
     return (costs + position).min(axis=1), position
 
 

@@ -160,7 +160,9 @@ def test_a_childs_bound_holds_its_own_prior_exactly(l_room):
     for _ in range(3):
         children = search_module._children(search, [state])
         js, turns = children.piece, children.turn
-        own, positions = search_module._child_priors(search, state, js, children.rotation, turns)
+        own, positions = search_module._child_priors(
+            search, [state], children.parent, js, children.rotation, turns
+        )
         assert children.position is not None and np.array_equal(positions, children.position)
         extended = [
             search_module._extend(search, state, j, t)
@@ -291,18 +293,33 @@ def test_placing_siblings_together_changes_no_step_of_the_search(monkeypatch, l_
         assert placement.candidates == first.candidates
 
 
-def test_a_batchs_children_split_by_state(l_room):
-    pieces, _ = _cut_with_priors(l_room, 5, 6, noise=(0.0, 0.0))
-    search = search_module._Search(pieces, GEOMETRY, SiteHints(), True)
+@pytest.mark.parametrize("with_priors", [False, True])
+def test_a_batchs_children_split_by_state(l_room, with_priors):
+    # With priors on some pieces only, the states of a batch hold different numbers of
+    # anchors; each child's costs are still those of its own state.
+    pieces, hints = _cut_with_priors(l_room, 5, 6, noise=(0.5, 0.1))
+    some = {k: v for k, v in hints.priors.items() if k not in ("p1", "p3")}
+    search = search_module._Search(
+        pieces, GEOMETRY, SiteHints(priors=some if with_priors else {}), True
+    )
     root = search_module._root(search)
-    states = [c for c in (search_module._extend(search, root, j, 1) for j in (1, 2, 3)) if c]
+    states = [
+        child
+        for child in (search_module._extend(search, root, j, t) for j in (1, 2, 3) for t in (0, 1))
+        if child is not None
+    ]
+    if with_priors:
+        assert len({len(state.anchors) for state in states}) > 1
     batch = search_module._children(search, states)
     for k, state in enumerate(states):
         alone, part = search_module._children(search, [state]), batch.of(k)
         assert np.array_equal(part.piece, alone.piece) and np.array_equal(part.turn, alone.turn)
         assert np.all(part.parent == 0)
-        assert part.bound == pytest.approx(alone.bound, abs=1e-12)
+        assert part.bound == pytest.approx(alone.bound, abs=1e-9)
         assert part.end == pytest.approx(alone.end, abs=1e-12)
+        if with_priors:
+            assert part.position is not None and alone.position is not None
+            assert part.position == pytest.approx(alone.position, abs=1e-9)
 
 
 @pytest.mark.parametrize("budget", [1, 7, 50])
