@@ -166,6 +166,14 @@ class PlacementParams(_Frozen):
         "none; at most half the node budget in all): a true partial loop can rank a few "
         "hundredth in the middle of the loop before its later junctions pay off",
     )
+    large_site_pieces: int = Field(
+        9,
+        ge=1,
+        description="sites of this many pieces or more are searched as large ones: the whole "
+        "beam width, and no exact finish in the children's bounds (there the node budget "
+        "decides, and the finish costs time without finding better loops). Each piece fewer "
+        "divides the beam by 3: a small site's depth-first search finishes anyway",
+    )
     max_search_nodes: int = Field(
         20_000,
         ge=1,

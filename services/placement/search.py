@@ -6,10 +6,13 @@ counter-clockwise loop implies cuts the tree: a junction continues the wall or t
 degrees (never folds back), so a rotation follows from the junction's turn; the turns add
 up to one full turn; walls may not cross or overlap. A child's lower bound adds what its
 junction costs, the cheapest way into every piece still to place, the turns still owed and
-the closure gap the remaining pieces cannot make up. Quick first passes that expand only
-the best one, two, three children per node (iterative broadening) find good loops early, so
-the full pass prunes tight. Bounds are computed for many states at once (a beam layer, or a
-few siblings placed together), since a node's cost is mostly numpy's per-call overhead.
+the closure gap the remaining pieces cannot make up; in a small site, with two pieces or
+fewer left after it, every way to finish the loop is tried instead (exact but for crossing
+walls, the hull and free space), so that fewer nodes near the leaves expand nothing. Quick
+first passes that expand only the best one, two, three children per node (iterative
+broadening) find good loops early, so the full pass prunes tight. Bounds are computed for
+many states at once (a beam layer, or a few siblings placed together), since a node's cost
+is mostly numpy's per-call overhead.
 
 The search keeps the ``top_k`` best assemblies, and its budget is a number of nodes, never a
 time: the same input gives the same answer on any machine.
@@ -69,6 +72,7 @@ _CLOSURE_DIRECTIONS = np.array(
 _AWAY_FROM_START = -_CLOSURE_DIRECTIONS.T  # an end's distance from the start along each u
 _BROADENING = (1, 2, 3)  # children per node in the search's quick first passes
 _DFS_GROUP = 8  # children the depth-first search places at once (see _dfs)
+_LOOKAHEAD = 2  # pieces left after a child when its bound tries every way to finish (<= 2)
 _F = {name: k for k, name in enumerate(FEATURES)}
 
 
@@ -152,11 +156,14 @@ class _Search:
     breadth: int | None = None
     lowest: float = np.inf  # energy of the best leaf so far
     truncated: bool = False
+    # Children's bounds try every way to finish the loop (small sites, see _children).
+    finish_exactly: bool = field(init=False)
     nodes: int = 0
     counter: itertools.count[int] = field(default_factory=itertools.count)
 
     def __post_init__(self) -> None:
         n = len(self.pieces)
+        self.finish_exactly = self.require_closed and n < self.params.large_site_pieces
         self.weights = feature_weights(self.params)
         self.noise = JunctionNoise.from_params(self.params)
         self.structure, self.boundary, self.measured = _pair_evidence(self.pieces, self.params)
@@ -196,6 +203,10 @@ class _Search:
     @cached_property
     def index(self) -> dict[str, int]:
         return {p.id: k for k, p in enumerate(self.pieces)}
+
+    @cached_property
+    def finishing(self) -> _Finishing:
+        return _finishing(self)
 
     @cached_property
     def pairs(self) -> list[tuple[int, int, bool]]:
@@ -661,12 +672,12 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
     facts = np.array(
         [(s.heading, s.turning, s.order[-1], n - len(s.order)) for s in states], dtype=np.intp
     ).reshape(-1, 4)
-    heading, turning, last, left = facts.T
+    heading, turned, last, left = facts.T
     values = np.array(
         [[*s.end.tolist(), *s.mean.tolist(), *s.var.tolist(), s.energy(weights)] for s in states]
     ).reshape(-1, 7)
     ends, mean, var, energy = values[:, 0:2], values[:, 2:4], values[:, 4:6], values[:, 6]
-    turning = turning + (remaining @ search.turning).astype(np.intp)  # with the pieces left
+    turning = turned + (remaining @ search.turning).astype(np.intp)  # with the pieces left
     turn_options = np.array(_TURNS)
     if search.require_closed:
         # The loop's turns add up to +4; the junctions after this one give +-1 each.
@@ -720,8 +731,25 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
     if search.require_closed:
         turn_cost += np.abs(4 - turning[parent] - turn)  # turns still owed
     # The junction into the piece replaces the cheapest way into it counted in entry_total.
-    bound = base[parent] + weights[_F["turns"]] * turn_cost
-    bound += search.junction[last[parent], piece] + entry_total[parent] - into[parent, piece]
+    ahead = weights[_F["turns"]] * turn_cost
+    ahead += search.junction[last[parent], piece] + entry_total[parent] - into[parent, piece]
+    if search.require_closed:
+        ahead += weights[_F["closure"]] * closure
+    if search.finish_exactly:
+        # Near the loop's end every way to finish it is few enough to try: turns, junctions
+        # and closure exactly (walls that would cross are not checked, so it stays a bound).
+        near = np.flatnonzero(left[parent] <= _LOOKAHEAD + 1)
+        if len(near):
+            p, j, t = parent[near], piece[near], turn[near]
+            step = search.step[heading[p], (heading[p] + t) % 4]
+            after = np.column_stack([child_heading[near], turned[p] + t + search.turning[j], j])
+            where = np.column_stack([child_end[near], mean[p] + step[:, 0], var[p] + step[:, 1]])
+            left_after = remaining[p]
+            left_after[np.arange(len(near)), j] = False
+            finish = _finishing_cost(search, after, where, left_after)
+            finish += weights[_F["turns"]] * (t != 0) + search.junction[last[p], j]
+            ahead = np.maximum(ahead, finish)
+    bound = base[parent] + ahead
     position = None
     if search.frame is not None:
         # The child's own prior is known exactly: it replaces the state's and the floor
@@ -730,9 +758,109 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
         prior_so_far = np.array([s.features[_F["prior"]] for s in states])
         floor_of_piece = search.rotation_floor[piece]
         bound += weights[_F["prior"]] * (own - prior_so_far[parent] - floor_of_piece)
-    if search.require_closed:
-        bound += weights[_F["closure"]] * closure
     return _Children(parent, piece, turn, rotation, child_heading, child_end, bound, position)
+
+
+@dataclass(frozen=True)
+class _Finishing:
+    """What each step of a loop's last few junctions adds, by the heading h before it, the
+    piece k it appends and its turn t (index into _TURNS); piece index n is "no piece", a
+    step that changes nothing (t = 0 only), so that loops with fewer pieces left share the
+    arrays. See :func:`_finishing_cost`."""
+
+    shift: FloatArray  # (4, n + 1, 3, 2) the piece's end offset plus the junction's mean
+    var: FloatArray  # (4, n + 1, 3, 2) the junction's variance
+    heading: NDArray[np.intp]  # (4, n + 1, 3) heading after the piece
+    gain: NDArray[np.intp]  # (n + 1, 3) quarter turns the junction and the piece add
+    cost: FloatArray  # (n + 1, 3) the turn's energy (inf for "no piece" turning)
+    junction: FloatArray  # (n + 1, n + 1) search.junction; 0 into "no piece"
+    # Closing the loop into the first piece from heading h: (4, 2) mean, (4, 2) variance,
+    # (4,) quarter turns (99 where it would fold back) and (4,) the turn's energy.
+    close_shift: FloatArray
+    close_var: FloatArray
+    close_gain: NDArray[np.intp]
+    close_cost: FloatArray
+
+
+def _finishing(search: _Search) -> _Finishing:
+    n, w_turn = len(search.pieces), search.weights[_F["turns"]]
+    turns = np.array(_TURNS)
+    h = np.arange(4)[:, None, None]
+    k = np.arange(n)[None, :, None]
+    heading_in = (h + turns) % 4  # (4, 1, 3)
+    rotation = (heading_in - search.first_direction[k]) % 4  # (4, n, 3)
+    step = search.step[h, heading_in]  # (4, 1, 3, 2, 2)
+    shift = np.zeros((4, n + 1, 3, 2))
+    shift[:, :n] = search.chain_ends[k, rotation] + step[..., 0, :]
+    var = np.zeros((4, n + 1, 3, 2))
+    var[:, :n] = step[..., 1, :]
+    heading = np.repeat(np.arange(4)[:, None, None], n + 1, axis=1).repeat(3, axis=2)
+    heading[:, :n] = (search.last_direction[k] + rotation) % 4
+    gain = np.zeros((n + 1, 3), dtype=np.intp)
+    gain[:n] = turns + search.turning[:, None]
+    cost = np.full((n + 1, 3), np.inf)
+    cost[:n] = w_turn * (turns != 0)
+    cost[n, 0] = 0.0
+    junction = np.zeros((n + 1, n + 1))
+    junction[:n, :n] = search.junction
+    first = search.pieces[0].directions[0]
+    closing = (first - np.arange(4)) % 4  # 0 continue, 1 left, 3 right, 2 folds back
+    close_gain = np.array([0, 1, 99, -1])[closing]
+    close_step = search.step[np.arange(4), first]
+    return _Finishing(
+        shift,
+        var,
+        heading,
+        gain,
+        cost,
+        junction,
+        close_step[:, 0],
+        close_step[:, 1],
+        close_gain,
+        w_turn * (closing != 0),
+    )
+
+
+def _finishing_cost(
+    search: _Search,
+    facts: NDArray[np.intp],
+    values: FloatArray,
+    left: NDArray[np.bool_],
+) -> FloatArray:
+    """(C,) the least cost of turns, junctions and closure over every way to finish each
+    child's loop (both orders and every turn of the at most two pieces left; inf when none
+    closes), as :func:`_extend` and :func:`_close` add them up from the child's end on.
+    Walls are not tested for crossing, so it is a lower bound of the energy still to come.
+
+    facts: (C, 3) heading, turns so far and last piece; values: (C, 6) end, mean and
+    variance of the hidden displacement (per axis); left: (C, n) the pieces still to place.
+    """
+    table, n = search.finishing, len(search.pieces)
+    padded = np.sort(np.where(left, np.arange(n), n), axis=1)[:, :2]
+    if padded.shape[1] < 2:
+        padded = np.column_stack([padded, np.full((len(padded), 2 - padded.shape[1]), n)])
+    orders = padded[:, [[0, 1], [1, 0]]]  # (C, 2 orders, 2 steps)
+    k1, k2 = orders[:, :, 0, None, None], orders[:, :, 1, None, None]  # (C, 2, 1, 1)
+    t1, t2 = np.arange(3)[:, None], np.arange(3)  # (3, 1) and (3,)
+    h0 = facts[:, 0, None, None, None]
+    h1 = table.heading[h0, k1, t1]  # (C, 2, 3, 1)
+    h2 = table.heading[h1, k2, t2]  # (C, 2, 3, 3)
+    last0 = facts[:, 2, None, None, None]
+    last1 = np.where(k1 == n, last0, k1)
+    last2 = np.where(k2 == n, last1, k2)
+    gain = table.gain[k1, t1] + table.gain[k2, t2] + table.close_gain[h2]
+    cost = table.cost[k1, t1] + table.cost[k2, t2] + table.close_cost[h2]
+    cost = cost + table.junction[last0, k1] + table.junction[last1, k2]
+    cost = cost + search.junction[last2, 0]
+    start = values[:, None, None, None, 0:2] + values[:, None, None, None, 2:4]
+    residual = start + table.shift[h0, k1, t1] + table.shift[h1, k2, t2] + table.close_shift[h2]
+    var = values[:, None, None, None, 4:6] + table.var[h0, k1, t1] + table.var[h1, k2, t2]
+    var = var + table.close_var[h2]
+    closure = 0.5 * np.sum(residual**2 / var + np.log(var), axis=-1)
+    total = cost + search.weights[_F["closure"]] * closure
+    total[facts[:, 1, None, None, None] + gain != 4] = np.inf
+    least: FloatArray = total.reshape(len(total), -1).min(axis=1)
+    return least
 
 
 def _child_priors(
@@ -832,8 +960,12 @@ def place_pieces(
         if require_closed and params.beam_width > 0:
             # A beam over the loop positions finds good loops of many pieces early and
             # evenly; the depth-first passes then prune against them. It spends at most half
-            # the node budget, so that a site of many pieces still ends with closed loops.
-            width = min(params.beam_width, params.max_search_nodes // (2 * max(n - 1, 1)))
+            # the node budget, so that a site of many pieces still ends with closed loops,
+            # and narrows for small sites, whose depth-first search finishes anyway.
+            width = min(
+                params.beam_width // 3 ** max(0, params.large_site_pieces - n),
+                params.max_search_nodes // (2 * max(n - 1, 1)),
+            )
             _beam(search, root, max(width, 1))
         # Iterative broadening: cheap passes that follow only the most promising children
         # spread good incumbents over the whole tree, so the full pass prunes early.

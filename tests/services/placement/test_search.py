@@ -180,6 +180,60 @@ def test_a_childs_bound_holds_its_own_prior_exactly(l_room):
     assert state.features[prior] > 0.0
 
 
+def _leaves_below(search, state, remaining):
+    """Energies of every closed leaf below ``state`` (each order and turn of the pieces in
+    ``remaining``), recorded in ``search``."""
+    if not remaining:
+        search_module._close(search, state)
+        return
+    for j, turn in itertools.product(remaining, search_module._TURNS):
+        child = search_module._extend(search, state, j, turn)
+        if child is not None:
+            _leaves_below(search, child, tuple(i for i in remaining if i != j))
+
+
+def _with_structure(search, structure):
+    """``search`` with these structure scores between pieces (and its junction costs)."""
+    search.structure = structure
+    search.junction = search.weights[search_module._F["structure"]] * structure
+    np.fill_diagonal(search.junction, search_module._SAME_PIECE)
+    return search
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_childs_bound_near_the_loops_end_is_its_best_leaf(monkeypatch, seed):
+    # With at most two pieces left after a child, its bound tries every way to finish the
+    # loop. With walls never crossing and no hull term, that is the best leaf below the
+    # child exactly (inf when none closes); random structure scores make every pair count.
+    monkeypatch.setattr(search_module, "_crosses", lambda new, placed: False)
+    rng = np.random.default_rng(seed)
+    rect = np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 4.0], [0.0, 4.0]])
+    pieces = chains_from_polygon(rect, [0.5, 3.0, 7.0, 11.0, 15.5], rng.integers(0, 4, 5).tolist())
+    params = GEOMETRY.model_copy(
+        update={"weight_hull": 0.0, "energy_window": 1e9, "top_k": 10_000, "use_structure": True}
+    )
+    structure = rng.uniform(-1.0, 0.0, (5, 5))
+    search = _with_structure(search_module._Search(pieces, params, SiteHints(), True), structure)
+    root = search_module._root(search)
+    checked = 0
+    for first, turn in itertools.product(range(1, 5), search_module._TURNS):
+        state = search_module._extend(search, root, first, turn)
+        if state is None:
+            continue
+        children = search_module._children(search, [state])
+        for c in range(len(children.piece)):
+            j = int(children.piece[c])
+            child = search_module._extend(search, state, j, int(children.turn[c]))
+            assert child is not None
+            leaves = search_module._Search(pieces, params, SiteHints(), True)
+            leaves = _with_structure(leaves, structure)
+            _leaves_below(leaves, child, tuple(i for i in range(1, 5) if i not in (first, j)))
+            best = min((-e for e, _, _ in leaves.top), default=np.inf)
+            assert children.bound[c] == pytest.approx(best, abs=1e-9)
+            checked += bool(np.isfinite(best))
+    assert checked > 5
+
+
 def _truth_priors(polygon, cuts, turns, rng=None, noise=(0.0, 0.0), frame=(0.5, (3.0, -1.0))):
     """Prior per piece from the truth: the piece made with ``turns[k]`` quarter turns sits
     turned back by them; the hints frame is the polygon's turned by frame[0], shifted."""
@@ -342,6 +396,19 @@ def test_a_wide_beam_leaves_the_budget_room_to_close_the_loop():
     placement = place_pieces(pieces, params)
     assert placement is not None and placement.closed
     assert placement.nodes_searched <= 4000 + 1
+
+
+def test_a_small_site_is_searched_in_fewer_nodes():
+    # Below large_site_pieces each piece fewer divides the beam by 3 (and children's bounds
+    # finish the loop exactly): a 6-piece site's depth-first search finishes anyway, and
+    # finds the same placements in fewer nodes.
+    pieces = _comb_pieces(6)
+    whole = place_pieces(pieces, GEOMETRY.model_copy(update={"large_site_pieces": 1}))
+    scaled = place_pieces(pieces, GEOMETRY)
+    assert whole is not None and scaled is not None
+    assert whole.exhaustive and scaled.exhaustive
+    assert scaled.candidates == whole.candidates
+    assert scaled.nodes_searched < whole.nodes_searched
 
 
 def test_same_input_same_result():
