@@ -33,7 +33,7 @@ from rich import box
 from rich.console import Console
 from rich.table import Table
 
-from bench.scoring import alternative_results
+from bench.scoring import alternative_results, share_interval
 from bench.world_scenes import (
     BUCKETS,
     DEFAULT_CACHE,
@@ -146,6 +146,15 @@ def _pct(values: Iterable[bool]) -> str:
     return f"{100 * np.mean(items):.1f}" if items else "-"
 
 
+def _pct_interval(values: Iterable[bool]) -> str:
+    """The share right, % with its 95 % interval: "52.4 (32-72)"."""
+    items = list(values)
+    if not items:
+        return "-"
+    lo, hi = share_interval(sum(items), len(items))
+    return f"{100 * np.mean(items):.1f} ({100 * lo:.0f}-{100 * hi:.0f})"
+
+
 def _mean_median(values: Sequence[float]) -> str:
     finite = [v for v in values if math.isfinite(v)]
     return f"{np.mean(finite):.2f} / {np.median(finite):.2f}" if finite else "-"
@@ -166,7 +175,8 @@ def bucket_table(outcomes: Sequence[Outcome], title: str) -> Table:
     """The main table: one row per set and bucket."""
     table = Table(title=title, title_justify="left", box=box.SIMPLE)
     headers = [
-        "set / fragments", "scenes", "ACC_global %", "closed (right %)", "ambiguous", "open",
+        "set / fragments", "scenes", "ACC_global % (95 % interval)", "closed (right %)",
+        "ambiguous", "open",
         "top-3 %", "ACC_local %", "rot. err mean/med deg", "transl. err mean/med %",
         "layout err %", "conf. mean", "time med / max s",
     ]  # fmt: skip
@@ -179,7 +189,7 @@ def bucket_table(outcomes: Sequence[Outcome], title: str) -> Table:
         table.add_row(
             label,
             str(len(rows)),
-            _pct(o.correct for o in rows),
+            _pct_interval(o.correct for o in rows),
             f"{len(closed)} ({_pct(o.correct for o in closed)})",
             str(sum(o.status == "ambiguous" for o in rows)),
             str(sum(o.status == "open" for o in rows)),

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.scoring import fit_logit_map, main_room_verdict
+from bench.scoring import fit_logit_map, main_room_verdict, share_interval
 from services.evaluation import evaluate_result
 from services.pipeline import place_site
 from services.synthetic import ground_truth_json
@@ -48,3 +48,14 @@ def test_an_overconfident_kind_gets_a_map_that_lowers_its_high_confidences() -> 
     mapped = 1.0 / (1.0 + np.exp(-(bias + slope * np.log(0.99 / 0.01))))
     assert 0.6 < mapped < 0.8
     assert "400 main rooms" in summary and "after 0 (0 right)" in summary
+
+
+@pytest.mark.parametrize(("right", "total"), [(0, 10), (11, 21), (30, 30), (80, 80)])
+def test_a_share_interval_holds_the_share_and_narrows_with_more_scenes(right, total) -> None:
+    lo, hi = share_interval(right, total)
+    assert 0.0 <= lo <= right / total <= hi <= 1.0
+    wider = share_interval(right // 4, total // 4)
+    assert hi - lo < wider[1] - wider[0]
+    # 30 of 30 right still leaves room for a true share under 90 %.
+    if right == total == 30:
+        assert lo == pytest.approx(0.886, abs=1e-3)
