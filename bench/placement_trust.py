@@ -152,7 +152,7 @@ def _pct_interval(values: Iterable[bool]) -> str:
     if not items:
         return "-"
     lo, hi = share_interval(sum(items), len(items))
-    return f"{100 * np.mean(items):.1f} ({100 * lo:.0f}-{100 * hi:.0f})"
+    return f"{_pct(items)} ({100 * lo:.0f}-{100 * hi:.0f})"
 
 
 def _mean_median(values: Sequence[float]) -> str:

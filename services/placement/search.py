@@ -690,6 +690,9 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
     rotation = (heading[parent] + turn - search.first_direction[piece]) % 4
     child_end = ends[parent] + search.chain_ends[piece, rotation]
     child_heading = (search.last_direction[piece] + rotation) % 4
+    # The hidden displacement up to each child's source, with its junction's.
+    entering = search.step[heading[parent], (heading[parent] + turn) % 4]
+    drift_mean, drift_var = mean[parent] + entering[:, 0], var[parent] + entering[:, 1]
 
     # Cheapest way into each piece left and into the loop's start, from a piece that can
     # still precede it (the current last piece or another one left).
@@ -741,9 +744,8 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
         near = np.flatnonzero(left[parent] <= _LOOKAHEAD + 1)
         if len(near):
             p, j, t = parent[near], piece[near], turn[near]
-            step = search.step[heading[p], (heading[p] + t) % 4]
             after = np.column_stack([child_heading[near], turned[p] + t + search.turning[j], j])
-            where = np.column_stack([child_end[near], mean[p] + step[:, 0], var[p] + step[:, 1]])
+            where = np.column_stack([child_end[near], drift_mean[near], drift_var[near]])
             left_after = remaining[p]
             left_after[np.arange(len(near)), j] = False
             finish = _finishing_cost(search, after, where, left_after)
@@ -754,7 +756,9 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
     if search.frame is not None:
         # The child's own prior is known exactly: it replaces the state's and the floor
         # counted for its piece's rotation.
-        own, position = _child_priors(search, states, parent, piece, rotation, turn)
+        own, position = _child_priors(
+            search, states, parent, piece, rotation, ends[parent], drift_mean, drift_var
+        )
         prior_so_far = np.array([s.features[_F["prior"]] for s in states])
         floor_of_piece = search.rotation_floor[piece]
         bound += weights[_F["prior"]] * (own - prior_so_far[parent] - floor_of_piece)
@@ -836,9 +840,7 @@ def _finishing_cost(
     variance of the hidden displacement (per axis); left: (C, n) the pieces still to place.
     """
     table, n = search.finishing, len(search.pieces)
-    padded = np.sort(np.where(left, np.arange(n), n), axis=1)[:, :2]
-    if padded.shape[1] < 2:
-        padded = np.column_stack([padded, np.full((len(padded), 2 - padded.shape[1]), n)])
+    padded = np.sort(np.where(left, np.arange(n), n), axis=1)[:, :2]  # n >= 2 (a child exists)
     orders = padded[:, [[0, 1], [1, 0]]]  # (C, 2 orders, 2 steps)
     k1, k2 = orders[:, :, 0, None, None], orders[:, :, 1, None, None]  # (C, 2, 1, 1)
     t1, t2 = np.arange(3)[:, None], np.arange(3)  # (3, 1) and (3,)
@@ -869,12 +871,15 @@ def _child_priors(
     parent: NDArray[np.intp],
     piece: NDArray[np.intp],
     rotation: NDArray[np.intp],
-    turn: NDArray[np.intp],
+    source: FloatArray,
+    drift_mean: FloatArray,
+    drift_var: FloatArray,
 ) -> tuple[FloatArray, FloatArray]:
-    """The prior feature of each child (piece[c] at rotation[c] after a junction that turns
-    by turn[c], its source at the end of states[parent[c]]), as :func:`_extend` computes
-    it: rotation costs and position costs (see :func:`_anchor`), the least over the frame's
-    quarter turns; and the position costs per quarter turn (C, 4)."""
+    """The prior feature of each child (piece[c] at rotation[c], its source at source[c],
+    the end of states[parent[c]], with the hidden displacement drift_mean[c] and
+    drift_var[c] up to it), as :func:`_extend` computes it: rotation costs and position
+    costs (see :func:`_anchor`), the least over the frame's quarter turns; and the position
+    costs per quarter turn (C, 4)."""
     rotation_prior = np.array([s.rotation_prior for s in states]).reshape(-1, 4)
     costs = rotation_prior[parent] + search.turned_rotation_cost[piece, rotation]
     position = np.array([s.position for s in states]).reshape(-1, 4)[parent]
@@ -887,14 +892,11 @@ def _child_priors(
         placed = np.zeros((len(states), int(anchored.max()), 5))
         for k, state in enumerate(states):
             placed[k, : len(state.anchors)] = state.anchors
-        of = parent[chosen]
-        heading = np.array([s.heading for s in states], dtype=np.intp)[of]
-        steps = search.step[heading, (heading + turn[chosen]) % 4]  # into each child's 1st wall
-        mean = np.array([s.mean for s in states]).reshape(-1, 2)[of] + steps[:, 0]
-        var = np.array([s.var for s in states]).reshape(-1, 2)[of] + steps[:, 1]
-        ends = np.array([s.end for s in states]).reshape(-1, 2)[of]
-        new = _anchor_rows(search, piece[chosen], ends, mean, var)
-        position[chosen] = position_costs_batch(np.concatenate([placed[of], new[:, None]], 1))
+        new = _anchor_rows(
+            search, piece[chosen], source[chosen], drift_mean[chosen], drift_var[chosen]
+        )
+        anchors = np.concatenate([placed[parent[chosen]], new[:, None]], 1)
+        position[chosen] = position_costs_batch(anchors)
     return (costs + position).min(axis=1), position
 
 

@@ -160,8 +160,16 @@ def test_a_childs_bound_holds_its_own_prior_exactly(l_room):
     for _ in range(3):
         children = search_module._children(search, [state])
         js, turns = children.piece, children.turn
+        entering = search.step[state.heading, (state.heading + turns) % 4]
         own, positions = search_module._child_priors(
-            search, [state], children.parent, js, children.rotation, turns
+            search,
+            [state],
+            children.parent,
+            js,
+            children.rotation,
+            np.tile(state.end, (len(js), 1)),
+            state.mean + entering[:, 0],
+            state.var + entering[:, 1],
         )
         assert children.position is not None and np.array_equal(positions, children.position)
         extended = [
