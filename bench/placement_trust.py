@@ -175,7 +175,8 @@ def bucket_table(outcomes: Sequence[Outcome], title: str) -> Table:
     """The main table: one row per set and bucket."""
     table = Table(title=title, title_justify="left", box=box.SIMPLE)
     headers = [
-        "set / fragments", "scenes", "ACC_global % (95 % interval)", "closed (right %)",
+        "set / fragments", "scenes", "ACC_global % (95 % interval)",
+        "closed: right % (95 % interval)",
         "ambiguous", "open",
         "top-3 %", "ACC_local %", "rot. err mean/med deg", "transl. err mean/med %",
         "layout err %", "conf. mean", "time med / max s",
@@ -190,7 +191,7 @@ def bucket_table(outcomes: Sequence[Outcome], title: str) -> Table:
             label,
             str(len(rows)),
             _pct_interval(o.correct for o in rows),
-            f"{len(closed)} ({_pct(o.correct for o in closed)})",
+            f"{len(closed)}: {_pct_interval(o.correct for o in closed)}",
             str(sum(o.status == "ambiguous" for o in rows)),
             str(sum(o.status == "open" for o in rows)),
             _pct(o.top3 for o in rows),
@@ -475,7 +476,7 @@ def _arguments(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="4 scenes per bucket, 8 real")
     parser.add_argument("--per-bucket", type=int, default=30, help="random rooms per bucket")
-    parser.add_argument("--real", type=int, default=60, help="real room shapes (2-8 fragments)")
+    parser.add_argument("--real", type=int, default=200, help="real room shapes (2-8 fragments)")
     parser.add_argument("--split", choices=("test", "tune"), default="test")
     parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
     parser.add_argument("--workers", type=int, default=2, help="processes building layouts")

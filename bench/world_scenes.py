@@ -99,10 +99,12 @@ def scene_jobs(split: Split, per_bucket: int, real: int, cache: Path = DEFAULT_C
         raw = json.loads(DEFAULT_PATH.read_text())
         tune, test = split_houses(str(e["house"]) for e in raw)
         shapes = load_room_shapes(houses=tune if split == "tune" else test)
-        picks = np.random.default_rng(base).choice(len(shapes), real, replace=False)
+        # A permutation's prefix: a larger draw keeps the smaller one's rooms (k-th room, seed).
+        picks = np.random.default_rng(base).permutation(len(shapes))[:real]
         for k, index in enumerate(picks):
             seed = base + _REAL_OFFSET + k
-            path = cache / f"{split}_real" / f"{seed}.json"
+            # The shape's index is in the name, so a cached scene is never another shape's.
+            path = cache / f"{split}_real" / f"{seed}-shape{index}.json"
             jobs.append(_Job(f"{split}_real", seed, (2, 8), shapes[index][1].tolist(), str(path)))
     for b, (lo, hi) in enumerate(BUCKETS):
         for k in range(per_bucket):

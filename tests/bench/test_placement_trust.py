@@ -1,4 +1,5 @@
-"""The trust benchmark's junction tables on one small world scene (real layouts)."""
+"""The trust benchmark's tables: junction tables on one small world scene (real layouts),
+the bucket table on outcomes made up here."""
 
 from __future__ import annotations
 
@@ -7,8 +8,9 @@ import itertools
 
 import numpy as np
 import pytest
+from rich.console import Console
 
-from bench.placement_trust import fragment_checks, overlap_table
+from bench.placement_trust import Outcome, bucket_table, fragment_checks, overlap_table
 from bench.world_scenes import CachedScene
 from services.pipeline import estimate_layout
 from services.synthetic import SceneSpec, generate_scene, ground_truth_json
@@ -62,3 +64,20 @@ def test_fragment_checks_judge_each_pose_relative_to_the_first(scene: CachedScen
     assert [fid for fid, (_, right) in checks.items() if not right] == [last["id"]]
     unsure = [{**f, "confidence": None} for f in fragments]
     assert fragment_checks({"fragments": unsure}, truth) == []
+
+
+def _outcome(seed: int, status: str, correct: bool) -> Outcome:
+    return Outcome(
+        "test_real", seed, 2, status, 0.99, correct, correct, [True, True], [], None, 0.1
+    )
+
+
+def test_bucket_table_gives_the_closed_results_right_share_with_its_interval() -> None:
+    closed = [_outcome(k, "closed", k != 0) for k in range(50)]
+    outcomes = [*closed, _outcome(99, "ambiguous", False)]
+    console = Console(record=True, width=400)
+    console.print(bucket_table(outcomes, "unit"))
+    text = console.export_text()
+    # 49 of 50 closed right: 98.0 %, Wilson interval 89.5-99.6 %.
+    assert "50: 98.0 (90-100)" in text
+    assert "96.1 (87-99)" in text  # ACC_global: 49 of 51
