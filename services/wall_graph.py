@@ -30,6 +30,8 @@ _CORNER_METERS = 0.3  # covered wall a corner must add to be worth it, m
 _COST_METERS = 0.1  # tie-break: meters of covered wall per unit of path cost
 _SNAP_CELLS = 2.0  # a segment end this close to a deduced corner is merged into it
 _END_MATCH = 0.05  # m, a line this close to a chain's end wall is that wall's line
+_LOW_WALL_SHARE = 0.5  # how much a cell with wall points but not the wall's full height covers
+_UNKNOWN_COST = 0.5  # what a cell showing neither wall nor space behind it costs a chain
 
 
 @dataclass(frozen=True)
@@ -105,7 +107,7 @@ def _edges(
     lines: list[WallLine], nodes: _Nodes, penalty: float
 ) -> tuple[csr_matrix, csr_matrix, FloatArray]:
     """Directed WE-graph weights, undirected ST-graph lengths, and per directed edge the
-    wall length (m) its high cells cover.
+    wall it explains (m, see :func:`_best_path`).
 
     The ST-graph joins only neighbouring nodes along a line (across gaps up to the
     occlusion reach), so its spanning forest follows the walls instead of jumping back.
@@ -140,7 +142,11 @@ def _edges(
                 weight = max(length - high, 0.0) / high + penalty
                 if weight < we.get((u, v), np.inf):
                     we[(u, v)] = weight
-                    cover[u, v] = min(high, length) * line.cell_size
+                    occupied, unknown = line.wall_cells(ru, rv)
+                    low = max(occupied - high, 0)
+                    cover[u, v] = (
+                        min(high, length) + _LOW_WALL_SHARE * low - _UNKNOWN_COST * unknown
+                    ) * line.cell_size
     return _sparse(we, n), _sparse(st, n), cover
 
 
@@ -201,11 +207,14 @@ def _best_path(
 ) -> tuple[list[int], float] | None:
     """The directed simple path that explains the most wall.
 
-    Score of a path: covered high-evidence length, less a price per corner (a spurious
-    extension through a deduced corner adds little wall), less a small share of the paper's
-    path cost as a tie-break. A min-cost path would rather skip a stretch of walls along
-    one long, partly evidenced line than follow them; this score follows them. A door or a
-    cabinet in front of a wall costs nothing, so a chain is not cut short before the last
+    Score of a path: covered high-evidence length, half the length where the wall shows only
+    low (a cabinet hides its foot), less half the length where the scan saw neither wall nor
+    space behind it (where a scan that saw the room all around ended: its chain opens there,
+    not in front of the cabinet), less a price per corner (a spurious extension through a
+    deduced corner adds little wall), less a small share of the paper's path cost as a
+    tie-break. A min-cost path would rather skip a stretch of walls along one long, partly
+    evidenced line than follow them; this score follows them. A door costs nothing and a
+    cabinet in front of a wall only half its length, so a chain is not cut short before the last
     stretch of wall; edges never run far through space seen on both sides of their line
     (see :meth:`WallLine.crossing_gap`). The paper instead takes the two ends of the
     longest path in a spanning forest of the keypoints (``source_target="spanning_forest"``).

@@ -138,6 +138,17 @@ class WallLine:
         high = int(np.count_nonzero(self.high[i0:i1]))
         return abs(end - start) / self.cell_size, high
 
+    def wall_cells(self, start: float, end: float) -> tuple[int, int]:
+        """Between two run coordinates: the cells holding any wall point of the line, and
+        the unknown cells (no wall point and no space seen behind the line). (0, 0) on a
+        deduced wall, which has no cells of its own."""
+        if self.occupied is None or self.seen_through is None:
+            return 0, 0
+        i0, i1 = self._cells(start, end)
+        occupied = self.occupied[i0:i1]
+        unknown = ~occupied & ~self.seen_through[i0:i1]
+        return int(np.count_nonzero(occupied)), int(np.count_nonzero(unknown))
+
     def point(self, run: float) -> FloatArray:
         """The (x, y) point at run coordinate ``run`` on this line."""
         return np.array([run, self.offset] if self.axis == 0 else [self.offset, run])

@@ -154,3 +154,47 @@ def test_a_wall_hidden_below_by_tall_furniture_runs_on_if_long_enough(width, run
     assert chain is not None
     end = 3.04 + (width if runs_on else 0.0)
     assert np.allclose(chain.keypoints, [[0.0, 1.0], [end, 1.0]], atol=0.01)
+
+
+def _flags(line: WallLine, spans: list[tuple[float, float]]) -> np.ndarray:
+    flags = np.zeros_like(line.high)
+    for lo, hi in spans:
+        flags[round((lo - line.origin) / CELL) : round((hi - line.origin) / CELL)] = True
+    return flags
+
+
+def _room_seen_all_around(bottom_low: tuple[float, float], top_gap: tuple[float, float]):
+    """A 6 x 4 m room seen all around, interior inside. On the bottom wall a cabinet hides
+    the lower part over ``bottom_low`` (wall points above it, none high enough to be high
+    evidence); on the top wall nothing at all was seen over ``top_gap`` (no wall points,
+    no space behind the line): where the scan stopped."""
+    bottom = _line(0, 0.0, 1, [(0.0, bottom_low[0]), (bottom_low[1], 6.0)])
+    bottom = dataclasses.replace(
+        bottom, occupied=_flags(bottom, [(0.0, 6.0)]), seen_through=_flags(bottom, [])
+    )
+    top = _line(0, 4.0, -1, [(0.0, top_gap[0]), (top_gap[1], 6.0)])
+    top = dataclasses.replace(
+        top,
+        occupied=_flags(top, [(0.0, top_gap[0]), (top_gap[1], 6.0)]),
+        seen_through=_flags(top, []),
+    )
+    sides = [_line(1, 6.0, 1, [(0.0, 4.0)]), _line(1, 0.0, -1, [(0.0, 4.0)])]
+    sides = [
+        dataclasses.replace(s, occupied=s.high.copy(), seen_through=_flags(s, [])) for s in sides
+    ]
+    return [bottom, top, *sides]
+
+
+@pytest.mark.parametrize(
+    ("top_gap", "cabinet"),
+    [((1.0, 2.5), (4.5, 5.5)), ((1.5, 3.0), (3.5, 4.5)), ((2.0, 3.5), (3.5, 4.5))],
+)
+def test_a_chain_seen_all_around_opens_where_nothing_was_seen(top_gap, cabinet):
+    # Neither stretch has high evidence; only the top one shows no wall at all. A cabinet in
+    # front of a wall is no place for the scan's end, the unseen stretch is: the chain runs
+    # along the whole bottom wall and ends where the top wall's gap begins.
+    chain = find_wall_chain(_room_seen_all_around(cabinet, top_gap), LayoutParams())
+    assert chain is not None
+    corners = [[0.0, 0.0], [6.0, 0.0], [6.0, 4.0]]
+    assert any(np.allclose(chain.keypoints[k : k + 3], corners, atol=0.1) for k in range(3))
+    assert np.allclose(chain.keypoints[-1], [top_gap[1], 4.0], atol=0.1)
