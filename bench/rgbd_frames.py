@@ -14,7 +14,8 @@ to a busy machine).
     .venv/bin/python bench/rgbd_frames.py --fit --scenes 540 --seed 2000 --shapes
 
 ``--shapes`` also runs rooms of real shapes (the MatterportLayout outlines of
-``../shared/data``, the benchmark's test split) when present.
+``../shared/data``: the test split's for held-out seeds, the tune split's for tune seeds)
+when present.
 
 ``--fit`` fits the frames' map of the confidence's logit (``frame_calibration``,
 :mod:`services.confidence`) instead: the scenes run with the map off, then a logistic
@@ -165,7 +166,8 @@ def main() -> None:
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     print(_row("synthetic", run(args.scenes, args.seed)))
-    outlines = _outlines("test") if args.shapes else []
+    # Tune seeds (2000 and up) draw the shapes' tune split, held-out seeds its test split.
+    outlines = _outlines("tune" if args.seed >= 2000 else "test") if args.shapes else []
     if outlines:
         print(_row("MatterportLayout shapes", run(args.scenes, args.seed, outlines)))
     print("paper (RGB-D and clouds): ACC_global 85.1 %, rotation 8.79 deg, translation 9.15 %")

@@ -223,6 +223,62 @@ def _flatten_ends(kp: FloatArray) -> FloatArray:
     return kp
 
 
+_PAST_CORNER_MIN = 0.2  # m, least wall evidence past a turn that says the turn was early
+_PAST_CORNER_MAX = 1.0  # m, most (deeper than furniture stands: another wall's evidence)
+_MAX_REVEAL = 0.35  # m, longest end wall read as a door's or window's reveal
+
+
+def _past_corner_fronts(keypoints: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
+    """The chain with a last wall that turned early moved onto the room's corner.
+
+    A wardrobe or shelf standing against wall B next to its corner with wall A hides that
+    corner: walking along A the chain turns onto the furniture's front F, in front of B,
+    while A's own evidence goes on past the turn (the part of A beside the furniture's side
+    is seen). When the chain's last wall is such an F (a left turn, A seen on past it by
+    0.2-1 m), the corner is where A's evidence ends and the last wall runs parallel to F
+    through it. Checked at both ends (at the source, F is the first wall).
+    """
+    kp = keypoints.copy()
+    if len(kp) < 3:
+        return kp
+    # (wall A's far end, the corner, F's end), A walked towards the corner: target, source.
+    for a, c, e in ((len(kp) - 3, len(kp) - 2, len(kp) - 1), (2, 1, 0)):
+        along, turn = _unit(kp[c] - kp[a]), _unit(kp[e] - kp[c])
+        cross = along[0] * turn[1] - along[1] * turn[0]
+        if (cross if e > c else -cross) < 0.5:
+            continue  # not a left turn in chain order
+        line = _wall_line(lines, *((kp[a], kp[c]) if e > c else (kp[c], kp[a])))
+        if line is None:
+            continue
+        outward = 1 if along[line.axis] > 0 else -1
+        reach = line.high_run_beyond(float(kp[c][line.axis]), outward)
+        if _PAST_CORNER_MIN <= reach <= _PAST_CORNER_MAX:
+            kp[c] = kp[c] + reach * along
+            kp[e] = kp[e] + reach * along
+    return kp
+
+
+def _drop_end_reveals(keypoints: FloatArray) -> FloatArray:
+    """The chain without end walls that are an opening's reveal.
+
+    Where a frame's view ends in a door or window, the chain can end on the opening's side:
+    a wall a few decimeters long (the wall's thickness) turning away from the room (a right
+    turn, interior on the left) behind the wall it leaves. A room's own wall that turns away
+    at a protruding corner is seen longer than that. Run after the furniture flattening (a
+    shelf's front seen past its side makes the same short right turn, and is flattened).
+    """
+    kp = keypoints
+    if len(kp) >= 3:  # the target end: a right turn onto a short last wall
+        last, before = kp[-1] - kp[-2], kp[-2] - kp[-3]
+        if before[0] * last[1] - before[1] * last[0] < 0 and np.linalg.norm(last) < _MAX_REVEAL:
+            kp = kp[:-1]
+    if len(kp) >= 3:  # the source end: a short first wall with a right turn after it
+        first, after = kp[1] - kp[0], kp[2] - kp[1]
+        if first[0] * after[1] - first[1] * after[0] < 0 and np.linalg.norm(first) < _MAX_REVEAL:
+            kp = kp[1:]
+    return kp
+
+
 def _reverse_chain(kp: FloatArray) -> FloatArray:
     """The same chain walked backwards with the room on its right; reversing twice is a
     no-op (used to treat the source end like the target end)."""
@@ -343,7 +399,8 @@ def estimate_frame_layout(
         return LocalLayout(
             keypoints=np.zeros((0, 2)), frame=frame, footprint=footprint, evidence="frame"
         )
-    kp = _flatten_furniture(_flatten_corner_fronts(chain.keypoints))
+    kp = _past_corner_fronts(chain.keypoints, lines)
+    kp = _drop_end_reveals(_flatten_furniture(_flatten_corner_fronts(kp)))
     kp = _to_frustum_edges(kp, lines, views)
     band, depth = params.layout.end_region_beyond, params.layout.end_region_depth
     report("done", 1.0)

@@ -30,6 +30,7 @@ _CORNER_METERS = 0.3  # covered wall a corner must add to be worth it, m
 _COST_METERS = 0.1  # tie-break: meters of covered wall per unit of path cost
 _SNAP_CELLS = 2.0  # a segment end this close to a deduced corner is merged into it
 _END_MATCH = 0.05  # m, a line this close to a chain's end wall is that wall's line
+_FOLLOW_MARGIN = 1.0  # m, more wall a frame's best-explaining chain must cover to be taken
 _LOW_WALL_SHARE = 0.5  # how much a cell with wall points but not the wall's full height covers
 _UNKNOWN_COST = 0.5  # what a cell showing neither wall nor space behind it costs a chain
 
@@ -344,16 +345,50 @@ def find_wall_chain(
         return None
     nodes = _build_nodes(lines)
     we, st, cover = _edges(lines, nodes, params.complexity_penalty)
-    found = _frustum_path(we, np.asarray(nodes.points), views) if views else None
+    points = np.asarray(nodes.points)
+    found = _frustum_path(we, points, views) if views else None
+    if found is not None:
+        found = _closer_to_the_walls(found, _best_path(we, cover, points), cover, points)
     if found is None and params.source_target == "spanning_forest":
         found = _forest_path(we, st)
     elif found is None:
-        found = _best_path(we, cover, np.asarray(nodes.points))
+        found = _best_path(we, cover, points)
     if found is None:
         return None
     order, cost = found
     points = _corners_only(np.array([nodes.points[i] for i in order]))
     return WallChain(keypoints=_ends_along_high_wall(points, lines), cost=cost)
+
+
+def _closer_to_the_walls(
+    frustum: tuple[list[int], float],
+    best: tuple[list[int], float] | None,
+    cover: FloatArray,
+    points: FloatArray,
+) -> tuple[list[int], float]:
+    """A frame's chain: the frustum's widest pair joined by the cheapest path, unless the
+    path explaining the most wall covers ``_FOLLOW_MARGIN`` more and runs along a wall of
+    the frustum's path (the same chain, following a recess or step the cheap path cuts
+    across; without a shared wall it may be another room seen through a door)."""
+    if best is None:
+        return frustum
+
+    def covered(path: list[int]) -> float:
+        return float(sum(cover[a, b] for a, b in itertools.pairwise(path)))
+
+    def walls(path: list[int]) -> set[tuple[int, int]]:
+        step = np.abs(np.diff(points[path], axis=0))
+        axis = (step[:, 1] > step[:, 0]).astype(np.int64)  # 0: the wall runs along x
+        offset = points[path[:-1]][np.arange(len(axis)), 1 - axis]
+        keys = np.rint(offset / _END_MATCH).astype(int)
+        return set(zip(axis.tolist(), keys.tolist(), strict=True))
+
+    if (
+        walls(best[0]) & walls(frustum[0])
+        and covered(best[0]) > covered(frustum[0]) + _FOLLOW_MARGIN
+    ):
+        return best
+    return frustum
 
 
 def _ends_along_high_wall(points: FloatArray, lines: Sequence[WallLine]) -> FloatArray:

@@ -117,6 +117,17 @@ class WallLine:
             return 0.0
         return stop * self.cell_size
 
+    def high_run_beyond(self, run: float, outward: int) -> float:
+        """How far (m) the line's high evidence goes on from run coordinate ``run`` in
+        direction ``outward`` (+1 or -1): a run of high cells (gaps of two cells bridged)
+        starting within two cells past ``run``; 0 when there is none."""
+        first = int(np.floor((run - self.origin) / self.cell_size))
+        ahead = self.high[max(first + 1, 0) :] if outward > 0 else self.high[: max(first, 0)][::-1]
+        spans = _runs(ahead, max_gap=_MAX_GAP_CELLS, min_len=1)
+        if not spans or spans[0][0] > _MAX_GAP_CELLS:
+            return 0.0
+        return spans[0][1] * self.cell_size
+
     def _longest_run(self, flags: NDArray[np.bool_] | None, start: float, end: float) -> float:
         if flags is None:
             return 0.0
@@ -273,6 +284,31 @@ class _TallRule:
         return n, top
 
 
+def _ray_crossings(
+    axis: int,
+    offset: float,
+    flat_xy: FloatArray,
+    centre: FloatArray,
+    origin: float,
+    cell: float,
+    n_cells: int,
+) -> FloatArray:
+    """(C,) per cell of a line, the scanned points behind it (seen from ``centre``, 0.12-1 m
+    behind) whose line of sight crosses the line in that cell: space seen through the cell
+    itself, not through a door or window beside it."""
+    o, r = 1 - axis, axis
+    side = np.sign(centre[o] - offset)
+    depth = (offset - flat_xy[:, o]) * side  # > 0 behind the line, seen from the centre
+    behind = flat_xy[(depth >= _NEAR_STRIP) & (depth <= _FAR_STRIP)]
+    if len(behind) == 0 or side == 0:
+        return np.zeros(n_cells)
+    t = (offset - centre[o]) / (behind[:, o] - centre[o])
+    run = centre[r] + t * (behind[:, r] - centre[r])
+    cells = np.floor((run - origin) / cell).astype(np.int64)
+    cells = cells[(cells >= 0) & (cells < n_cells)]
+    return np.bincount(cells, minlength=n_cells).astype(np.float64)
+
+
 def _lines_from_peak(
     axis: int,
     offset: float,
@@ -280,11 +316,14 @@ def _lines_from_peak(
     grid: _Grid,
     rule: _TallRule,
     params: LayoutParams,
+    flat_xy: FloatArray,
 ) -> list[WallLine]:
     """Evidence along one line from its member points (aligned frame, (M, 3)).
 
     Each side is tried as the interior: a line yields one wall per side whose cells bound
     the scanned space from that side (two walls when collinear walls face each other).
+    flat_xy: (F, 2) the fragment's horizontal-surface points (floor, ceiling), aligned frame;
+    with a single camera, what is seen behind a cell is counted where its ray crosses the line.
     """
     s = params.cell_size
     origin = grid.origin[axis]
@@ -305,6 +344,16 @@ def _lines_from_peak(
     least_n, least_top = rule.per_cell(xy if axis == 0 else xy[:, ::-1], s)
     tall = (np.bincount(keys // 4096, minlength=n_cells) >= least_n) & (reach >= least_top)
     behind, front = grid.strip_sums(axis, offset, np.arange(n_cells))
+    one_camera = len(rule.views) == 1
+    if one_camera:
+        # One camera: what was seen behind a cell is what its rays saw through that cell, not
+        # the floor seen through a door beside it.
+        centre = rule.views[0].centre[:2]
+        crossing = _ray_crossings(axis, offset, flat_xy, centre, origin, s, n_cells)
+        if centre[1 - axis] > offset:
+            behind = crossing
+        else:
+            front = crossing
     lines = []
     for sign, near_side, far_side in ((1, front, behind), (-1, behind, front)):
         high = tall & (far_side <= _BEHIND_RATIO * np.maximum(near_side, 1.0))
@@ -317,6 +366,8 @@ def _lines_from_peak(
         travel = sign if axis == 0 else -sign
         unsupported = ~high & (near_side < _SUPPORT_POINTS)
         seen_through = ~high & (far_side >= _SUPPORT_POINTS)
+        if one_camera:
+            unsupported &= ~seen_through  # a doorway: crossing_gap bounds it
         lines.append(
             WallLine(
                 axis,
@@ -457,7 +508,9 @@ def find_wall_lines(
             if len(members) == 0:
                 continue  # a peak of the binned histogram can fall between the points
             offset = float(np.median(members[:, offset_axis]))
-            lines += _lines_from_peak(axis, offset, members, grid, rule, params)
+            lines += _lines_from_peak(
+                axis, offset, members, grid, rule, params, aligned[horizontal, :2]
+            )
     if views:
         lines = _facing_cameras(lines, views, params)
     return lines + _occluded_links(lines, grid)

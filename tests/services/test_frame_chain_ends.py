@@ -1,16 +1,21 @@
 """RGB-D frame chains: the floor under a table top, furniture fronts flattened into the wall
-behind them, chain ends moved out to the frustum's edges, and the frustum's floor-plan wedge."""
+behind them, a corner hidden by furniture, an opening's reveal at a chain end, chain ends
+moved out to the frustum's edges, and the frustum's floor-plan wedge."""
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 import pytest
 
 from schemas.params import PipelineParams
 from services.frame_layout import (
+    _drop_end_reveals,
     _flatten_corner_fronts,
     _flatten_furniture,
     _floor,
+    _past_corner_fronts,
     _to_frustum_edges,
 )
 from services.frustum import CameraView, in_any_view, side_rays
@@ -121,3 +126,33 @@ def test_the_floor_plan_wedge_of_a_pitched_camera_is_wider_than_its_eye_level_cu
     assert in_any_view([view], beyond[None], tolerance_deg=0.0)[0]
     far_out = 3.0 * np.array([np.sin(eye + np.radians(30.0)), np.cos(eye + np.radians(30.0))])
     assert not in_any_view([view], far_out[None], tolerance_deg=0.0)[0]
+
+
+def test_an_end_wall_as_short_as_a_reveal_turning_away_is_dropped() -> None:
+    # Along y = 3 travelling -x (room below), the chain ends on a 0.25 m wall turning away
+    # from the room (a right turn, +y): a door's or window's side.
+    chain = np.array([[3.0, 3.0], [0.0, 3.0], [0.0, 3.25]])
+    np.testing.assert_allclose(_drop_end_reveals(chain), chain[:2])
+    # The same at the source end, walked the other way round.
+    source = np.array([[0.0, 2.75], [0.0, 3.0], [3.0, 3.0]])
+    np.testing.assert_allclose(_drop_end_reveals(source), source[1:])
+    # A protruding corner seen 0.5 m long is the room's own; a left turn is a corner.
+    longer = np.array([[3.0, 3.0], [0.0, 3.0], [0.0, 3.5]])
+    np.testing.assert_allclose(_drop_end_reveals(longer), longer)
+    inward = np.array([[3.0, 3.0], [0.0, 3.0], [0.0, 2.75]])
+    np.testing.assert_allclose(_drop_end_reveals(inward), inward)
+
+
+def test_a_corner_hidden_by_a_wardrobe_is_moved_where_the_wall_beside_it_ends() -> None:
+    # Wall A along y = 3 travelled -x (room below) is seen on to x = -0.5; a wardrobe in the
+    # corner hides the corner (x = -0.5), and the chain turned onto its front at x = 0.
+    wall = _line(3.0, -1)
+    cells = np.arange(len(wall.high))
+    runs = wall.origin + (cells + 0.5) * wall.cell_size
+    wall = dataclasses.replace(wall, high=(runs > -0.5) & (runs < 4.0))
+    chain = np.array([[3.0, 3.0], [0.0, 3.0], [0.0, 1.0]])
+    moved = _past_corner_fronts(chain, [wall])
+    np.testing.assert_allclose(moved, [[3.0, 3.0], [-0.48, 3.0], [-0.48, 1.0]], atol=0.05)
+    # Wall seen on past the turn by more than furniture is deep: another wall's evidence.
+    far = dataclasses.replace(wall, high=(runs > -2.0) & (runs < 4.0))
+    np.testing.assert_allclose(_past_corner_fronts(chain, [far]), chain)

@@ -249,3 +249,13 @@ def test_a_door_at_a_walls_end_is_told_by_its_lintel(lintel):
     reach = line.high_wall_beyond(end, 1)
     assert reach == (pytest.approx(0.9, abs=0.1) if lintel else 0.0)
     assert line.high_wall_beyond(float(line.segments[0, 0]), -1) == 0.0  # nothing seen there
+
+
+def test_high_evidence_beyond_a_point_is_measured_along_the_line() -> None:
+    high = np.zeros(50, dtype=bool)
+    high[10:20] = True  # cells of 0.1 m from run 0: high from 1.0 to 2.0 m
+    high[21:23] = True  # a one-cell gap is bridged
+    line = WallLine(0, 0.0, 1, 0.0, 0.1, high, np.array([[1.0, 2.3]]))
+    assert line.high_run_beyond(0.95, 1) == pytest.approx(2.3 - 1.0)  # starts a cell on
+    assert line.high_run_beyond(2.35, -1) == pytest.approx(2.3 - 1.0, abs=0.11)
+    assert line.high_run_beyond(0.5, 1) == 0.0  # nothing within two cells of the point
