@@ -85,13 +85,15 @@ def run(
     confidences: list[float] = []
     right: list[bool] = []
     clock = LayoutClock()
+    skipped = 0
     for k in range(n_scenes):
         seed = first_seed + k
         outline = outlines[k % len(outlines)] if outlines else None
         try:
             scene = generate_frame_scene(spec, seed, outline)
         except RuntimeError:
-            continue  # no station tiles this room within range
+            skipped += 1  # no station tiles this room within range
+            continue
         aligned = align_fragments({f.id: f.frame for f in scene.frames}, params, clock)
         result = aligned.result.model_dump(mode="json")
         truth = frame_ground_truth_json(scene)
@@ -110,6 +112,7 @@ def run(
     cpu_ms, cpu_ms_p90 = _median_ms(clock.cpu)
     return {
         "scenes": len(global_ok),
+        "skipped": skipped,
         "frames": sum(frames),
         "acc_local": float(np.mean(local)) if local else math.nan,
         "acc_global": float(np.mean(global_ok)) if global_ok else math.nan,
@@ -137,8 +140,9 @@ def _median_ms(values: list[float]) -> tuple[float, float]:
 
 
 def _row(name: str, r: dict[str, Any]) -> str:
+    scenes = f"{r['scenes']}" + (f" ({r['skipped']} not rendered)" if r["skipped"] else "")
     return (
-        f"| {name} | {r['scenes']} | {r['frames']} | {100 * r['acc_local']:.1f} | "
+        f"| {name} | {scenes} | {r['frames']} | {100 * r['acc_local']:.1f} | "
         f"{100 * r['acc_global']:.1f} | {r['rotation_deg']:.2f} | {r['translation_pct']:.2f} | "
         f"{r['closed']} ({r['closed_right']}) | {r['ambiguous']} | "
         f"{r['ms_per_frame']:.0f} ({r['ms_per_frame_p90']:.0f}) | "

@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
-from bench.rgbd_frames import LayoutClock, run
+from bench.rgbd_frames import LayoutClock, _row, run
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -22,10 +23,17 @@ def test_each_local_layout_is_timed_until_the_next_stage() -> None:
 
 def test_one_scene_is_scored_with_every_frame_timed() -> None:
     figures = run(1, 1000)
-    assert figures["scenes"] == 1 and figures["frames"] >= 3
+    assert figures["scenes"] == 1 and figures["frames"] >= 3 and figures["skipped"] == 0
     assert 0.0 <= figures["acc_local"] <= 1.0 and figures["acc_global"] in (0.0, 1.0)
     assert figures["cpu_ms_per_frame"] > 0.0 and not math.isnan(figures["ms_per_frame_p90"])
     # The statuses are counted apart: closed (and how many of those are right), ambiguous.
     assert figures["closed"] + figures["ambiguous"] <= 1
     assert figures["closed_right"] <= figures["closed"]
     assert figures["closed_right"] == (figures["closed"] == 1 and figures["acc_global"] == 1.0)
+
+
+def test_a_room_no_station_can_tile_is_counted_as_not_rendered() -> None:
+    hall = np.array([[0.0, 0.0], [40.0, 0.0], [40.0, 40.0], [0.0, 40.0]])  # beyond any range
+    figures = run(1, 1000, [hall])
+    assert figures["scenes"] == 0 and figures["skipped"] == 1
+    assert _row("hall", figures).startswith("| hall | 0 (1 not rendered) | 0 |")
