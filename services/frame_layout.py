@@ -228,6 +228,11 @@ _PAST_CORNER_MAX = 1.0  # m, most (deeper than furniture stands: another wall's 
 _MAX_REVEAL = 0.35  # m, longest end wall read as a door's or window's reveal
 
 
+def _cross(a: FloatArray, b: FloatArray) -> float:
+    """The cross product of two floor-plan vectors (its z): > 0 when b turns left of a."""
+    return float(a[0] * b[1] - a[1] * b[0])
+
+
 def _past_corner_fronts(keypoints: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
     """The chain with a last wall that turned early moved onto the room's corner.
 
@@ -244,7 +249,7 @@ def _past_corner_fronts(keypoints: FloatArray, lines: Sequence[WallLine]) -> Flo
     # (wall A's far end, the corner, F's end), A walked towards the corner: target, source.
     for a, c, e in ((len(kp) - 3, len(kp) - 2, len(kp) - 1), (2, 1, 0)):
         along, turn = _unit(kp[c] - kp[a]), _unit(kp[e] - kp[c])
-        cross = along[0] * turn[1] - along[1] * turn[0]
+        cross = _cross(along, turn)
         if (cross if e > c else -cross) < 0.5:
             continue  # not a left turn in chain order
         line = _wall_line(lines, *((kp[a], kp[c]) if e > c else (kp[c], kp[a])))
@@ -270,11 +275,11 @@ def _drop_end_reveals(keypoints: FloatArray) -> FloatArray:
     kp = keypoints
     if len(kp) >= 3:  # the target end: a right turn onto a short last wall
         last, before = kp[-1] - kp[-2], kp[-2] - kp[-3]
-        if before[0] * last[1] - before[1] * last[0] < 0 and np.linalg.norm(last) < _MAX_REVEAL:
+        if _cross(before, last) < 0 and np.linalg.norm(last) < _MAX_REVEAL:
             kp = kp[:-1]
     if len(kp) >= 3:  # the source end: a short first wall with a right turn after it
         first, after = kp[1] - kp[0], kp[2] - kp[1]
-        if first[0] * after[1] - first[1] * after[0] < 0 and np.linalg.norm(first) < _MAX_REVEAL:
+        if _cross(first, after) < 0 and np.linalg.norm(first) < _MAX_REVEAL:
             kp = kp[1:]
     return kp
 

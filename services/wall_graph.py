@@ -345,14 +345,15 @@ def find_wall_chain(
         return None
     nodes = _build_nodes(lines)
     we, st, cover = _edges(lines, nodes, params.complexity_penalty)
-    points = np.asarray(nodes.points)
-    found = _frustum_path(we, points, views) if views else None
+    node_points = np.asarray(nodes.points)
+    found = _frustum_path(we, node_points, views) if views else None
     if found is not None:
-        found = _closer_to_the_walls(found, _best_path(we, cover, points), cover, points)
+        best = _best_path(we, cover, node_points)
+        found = _closer_to_the_walls(found, best, cover, node_points)
     if found is None and params.source_target == "spanning_forest":
         found = _forest_path(we, st)
     elif found is None:
-        found = _best_path(we, cover, points)
+        found = _best_path(we, cover, node_points)
     if found is None:
         return None
     order, cost = found

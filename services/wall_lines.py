@@ -101,17 +101,11 @@ class WallLine:
             return 0.0
         first = int(np.rint((run - self.origin) / self.cell_size)) - (outward < 0)
         limit = int(np.ceil(MAX_DOORWAY / self.cell_size)) + _MAX_GAP_CELLS + 1
-
-        def ahead(flags: NDArray[np.bool_]) -> NDArray[np.bool_]:
-            if outward > 0:
-                return flags[max(first, 0) : first + limit]
-            return flags[max(first - limit + 1, 0) : max(first + 1, 0)][::-1]
-
-        spans = _runs(ahead(self.lintel), max_gap=_MAX_GAP_CELLS, min_len=1)
-        if not spans or spans[0][0] > _MAX_GAP_CELLS:
+        span = _run_ahead(self.lintel, first, outward, limit)
+        if span is None:
             return 0.0
-        start, stop = spans[0]
-        doorway = bool(ahead(self.seen_through)[start:stop].any())
+        start, stop = span
+        doorway = bool(_cells_ahead(self.seen_through, first, outward, limit)[start:stop].any())
         least = _MIN_DOORWAY if doorway else _MIN_HIDDEN_WALL
         if (stop - start) * self.cell_size < least or stop * self.cell_size > MAX_DOORWAY:
             return 0.0
@@ -122,11 +116,8 @@ class WallLine:
         direction ``outward`` (+1 or -1): a run of high cells (gaps of two cells bridged)
         starting within two cells past ``run``; 0 when there is none."""
         first = int(np.floor((run - self.origin) / self.cell_size))
-        ahead = self.high[max(first + 1, 0) :] if outward > 0 else self.high[: max(first, 0)][::-1]
-        spans = _runs(ahead, max_gap=_MAX_GAP_CELLS, min_len=1)
-        if not spans or spans[0][0] > _MAX_GAP_CELLS:
-            return 0.0
-        return spans[0][1] * self.cell_size
+        span = _run_ahead(self.high, first + outward, outward)
+        return 0.0 if span is None else span[1] * self.cell_size
 
     def _longest_run(self, flags: NDArray[np.bool_] | None, start: float, end: float) -> float:
         if flags is None:
@@ -199,6 +190,28 @@ def _offset_peaks(offsets: FloatArray, min_support: float) -> FloatArray:
         if all(abs(position - p) > _MERGE_DISTANCE for p in peaks):
             peaks.append(position)
     return np.asarray(peaks)
+
+
+def _cells_ahead(
+    flags: NDArray[np.bool_], start: int, outward: int, limit: int | None = None
+) -> NDArray[np.bool_]:
+    """The flags from cell ``start`` on, walking ``outward`` (+1 or -1), at most ``limit``
+    cells (to the line's end without one)."""
+    if outward > 0:
+        return flags[max(start, 0) : None if limit is None else start + limit]
+    lowest = 0 if limit is None else max(start - limit + 1, 0)
+    return flags[lowest : max(start + 1, 0)][::-1]
+
+
+def _run_ahead(
+    flags: NDArray[np.bool_], start: int, outward: int, limit: int | None = None
+) -> tuple[int, int] | None:
+    """The first run of True cells walking ``outward`` from cell ``start`` (gaps of two
+    cells bridged), as [begin, end) cells from ``start``, if it begins within two cells."""
+    spans = _runs(_cells_ahead(flags, start, outward, limit), max_gap=_MAX_GAP_CELLS, min_len=1)
+    if not spans or spans[0][0] > _MAX_GAP_CELLS:
+        return None
+    return spans[0]
 
 
 def _runs(mask: NDArray[np.bool_], max_gap: int, min_len: int) -> list[tuple[int, int]]:
@@ -497,6 +510,7 @@ def find_wall_lines(
         views=tuple(views),
     )
     lines: list[WallLine] = []
+    flat_xy = aligned[horizontal, :2]
     for axis in (0, 1):
         offset_axis = 1 - axis
         facing = in_band & (np.abs(normals[:, offset_axis]) > _AXIS_COS)
@@ -508,9 +522,7 @@ def find_wall_lines(
             if len(members) == 0:
                 continue  # a peak of the binned histogram can fall between the points
             offset = float(np.median(members[:, offset_axis]))
-            lines += _lines_from_peak(
-                axis, offset, members, grid, rule, params, aligned[horizontal, :2]
-            )
+            lines += _lines_from_peak(axis, offset, members, grid, rule, params, flat_xy)
     if views:
         lines = _facing_cameras(lines, views, params)
     return lines + _occluded_links(lines, grid)
