@@ -19,8 +19,8 @@ import numpy as np
 
 from schemas.frames import IntrinsicsModel
 from schemas.params import PipelineParams
-from services.frustum import CameraView, in_any_view, side_rays
-from services.local_layout import boundary_points, footprint_cells
+from services.frustum import CameraView, in_any_view, side_rays, swept_cells
+from services.local_layout import FOOTPRINT_CELL, boundary_points, footprint_cells
 from services.manhattan import estimate_manhattan_frame, thin_with_normals
 from services.rgbd import OPTICAL_TO_LEVEL, RgbdFrame, backproject
 from services.types import FloatArray, LocalLayout, ManhattanFrame, ProgressFn
@@ -398,7 +398,11 @@ def estimate_frame_layout(
     lines = find_wall_lines(aligned, normals, frame.floor_z, frame.ceiling_z, params.layout, views)
     report("chain", 0.7)
     chain = find_wall_chain(lines, params.layout, views)
-    footprint = footprint_cells(aligned)
+    # What the frame saw empty: the cells holding its points and those its rays crossed.
+    footprint = np.unique(
+        np.vstack([footprint_cells(aligned), swept_cells(views, aligned[:, :2], FOOTPRINT_CELL)]),
+        axis=0,
+    )
     if chain is None or len(chain.keypoints) < 2:
         report("done", 1.0)
         return LocalLayout(

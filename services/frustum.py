@@ -5,7 +5,9 @@ where the frame's wall chain can start and end (the widest pair of keypoints see
 camera, :func:`services.wall_graph.find_wall_chain`), and over each floor-plan column it
 bounds the height the camera saw: a wall near the camera shows only its lower part, so the
 "reaches the ceiling" test of the wall evidence is measured against what was visible
-(:func:`services.wall_lines.find_wall_lines`).
+(:func:`services.wall_lines.find_wall_lines`). And every ray crossed open space on its way to
+the point it hit: the floor-plan cells it crossed hold no wall (:func:`swept_cells`), which
+the placement uses to refuse other fragments' walls there.
 """
 
 from __future__ import annotations
@@ -19,9 +21,12 @@ from numpy.typing import NDArray
 from schemas.frames import IntrinsicsModel
 from services.types import FloatArray
 
-__all__ = ["CameraView", "in_any_view", "side_rays", "visible_band"]
+__all__ = ["CameraView", "in_any_view", "side_rays", "swept_cells", "visible_band"]
 
 _FLAT = 1e-9
+_SWEEP_BIN = np.radians(0.5)  # bearing bins of the swept rays: 5 cm apart at 6 m
+_SWEEP_QUANTILE = 0.9  # a bin's reach: this quantile of its points' distances (not a stray)
+_SWEEP_SHORT = 0.15  # m, rays stop this short of what they hit (noise, the wall's own cell)
 
 
 @dataclass(frozen=True)
@@ -170,3 +175,40 @@ def side_rays(view: CameraView) -> FloatArray:
         direction = direction / norm
         rays.append(direction if direction @ view.forward >= 0 else -direction)
     return np.array(rays)
+
+
+def swept_cells(views: Sequence[CameraView], xy: FloatArray, cell: float) -> FloatArray:
+    """Centres of the floor-plan cells (grid of size ``cell``, aligned frame) that the
+    cameras' rays crossed on their way to the points they hit.
+
+    A full-height wall stands nowhere on such a ray's floor-plan projection, whatever
+    height the ray ran at: a frame sees its floor only a few meters out, but it sees the
+    space up to its walls empty. Points are binned by bearing per camera (those within its
+    wedge); a bin's ray runs to a high quantile of its points' distances, so a stray point
+    through a window does not carry it out.
+
+    xy : (M, 2) float64, the frame's points on the floor plan, aligned frame.
+    Returns (C, 2) float64, unique cell centres.
+    """
+    points = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    cells = [np.zeros((0, 2), dtype=np.int64)]
+    for view in views:
+        d = points[in_any_view([view], points, 0.0)] - view.centre[:2]
+        if len(d) == 0:
+            continue
+        reach = np.hypot(d[:, 0], d[:, 1])
+        bins = np.floor(np.arctan2(d[:, 1], d[:, 0]) / _SWEEP_BIN).astype(np.int64)
+        order = np.lexsort((reach, bins))
+        labels, first, counts = np.unique(bins[order], return_index=True, return_counts=True)
+        at = first + np.floor(_SWEEP_QUANTILE * (counts - 1)).astype(np.int64)
+        ends = reach[order][at] - _SWEEP_SHORT
+        bearing = (labels + 0.5) * _SWEEP_BIN
+        steps = np.arange(0.0, float(ends.max(initial=0.0)), cell / 2)
+        # (T, B) samples along every bin's ray, kept up to that bin's reach
+        keep = steps[:, None] < ends[None, :]
+        along = np.stack([np.cos(bearing), np.sin(bearing)], axis=-1)
+        samples = view.centre[:2] + steps[:, None, None] * along[None]
+        cells.append(np.floor(samples[keep] / cell).astype(np.int64))
+    unique = np.unique(np.vstack(cells), axis=0)
+    centres: FloatArray = ((unique + 0.5) * cell).astype(np.float64)
+    return centres

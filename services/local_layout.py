@@ -10,10 +10,10 @@ from services.types import Evidence, FloatArray, LocalLayout, ProgressFn
 from services.wall_graph import find_wall_chain
 from services.wall_lines import find_wall_lines
 
-__all__ = ["boundary_points", "estimate_local_layout", "footprint_cells"]
+__all__ = ["FOOTPRINT_CELL", "boundary_points", "estimate_local_layout", "footprint_cells"]
 
 _MAX_BOUNDARY_POINTS = 4000
-_FOOTPRINT_CELL = 0.25  # m
+FOOTPRINT_CELL = 0.25  # m
 _FOOTPRINT_MIN_POINTS = 4
 
 
@@ -42,7 +42,7 @@ def boundary_points(
     return near[::stride].copy()
 
 
-def footprint_cells(aligned: FloatArray, cell: float = _FOOTPRINT_CELL) -> FloatArray:
+def footprint_cells(aligned: FloatArray, cell: float = FOOTPRINT_CELL) -> FloatArray:
     """Centres of the coarse cells holding at least a few points (outliers drop out).
 
     Parameters

@@ -176,14 +176,36 @@ def boundary_mismatch(a: Piece, b: Piece, params: PlacementParams) -> float:
     Each cross-section is read in its own cutting plane, within the boundary band: offset
     from its own wall towards the interior, and height. The score is the mean over both
     sides' points of Phi(d / sigma) - Phi(-d / sigma), d the distance to the nearest point
-    of the other side; 0.5 when either side has too few points.
+    of the other side; 0.5 when either side has too few points. Where either side is an
+    RGB-D frame, only the part of the section both sides saw is compared
+    (:func:`_common_window`).
     """
     band = params.boundary_band
     pa = a.target_region[np.abs(a.target_region[:, 0]) < band]
     pb = b.source_region[np.abs(b.source_region[:, 0]) < band]
+    framed = "frame" in (a.evidence, b.evidence)
+    if framed and min(len(pa), len(pb)) >= params.min_boundary_points:
+        pa, pb = _common_window(pa, pb, params.boundary_sigma)
     if min(len(pa), len(pb)) < params.min_boundary_points:
         return 0.5
     d_ab, _ = cKDTree(pb[:, 1:]).query(pa[:, 1:])
     d_ba, _ = cKDTree(pa[:, 1:]).query(pb[:, 1:])
     scores = erf(np.concatenate([d_ab, d_ba]) / (params.boundary_sigma * np.sqrt(2.0)))
     return float(scores.mean())
+
+
+def _common_window(a: FloatArray, b: FloatArray, margin: float) -> tuple[FloatArray, FloatArray]:
+    """Both cross-sections cut to the part of the section (depth into the room, height)
+    that both sides saw, give or take ``margin``. For RGB-D frames: a frame's chain ends at
+    its frustum's edge, and how much of the section it saw there depends on how far its
+    camera stood (near: the wall's lower part; further: the floor in front of it too), so
+    what only one side saw is no mismatch. A cloud's scanner sees the whole section, and a
+    section reaching deeper on one side (furniture) is evidence; clouds are not cut."""
+    lo = np.maximum(a[:, 1:].min(axis=0), b[:, 1:].min(axis=0)) - margin
+    hi = np.minimum(a[:, 1:].max(axis=0), b[:, 1:].max(axis=0)) + margin
+
+    def inside(p: FloatArray) -> FloatArray:
+        kept: FloatArray = p[np.all((p[:, 1:] >= lo) & (p[:, 1:] <= hi), axis=1)]
+        return kept
+
+    return inside(a), inside(b)

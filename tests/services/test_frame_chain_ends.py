@@ -18,7 +18,7 @@ from services.frame_layout import (
     _past_corner_fronts,
     _to_frustum_edges,
 )
-from services.frustum import CameraView, in_any_view, side_rays
+from services.frustum import CameraView, in_any_view, side_rays, swept_cells
 from services.synthetic.render import KINECT
 from services.wall_lines import WallLine
 from tests.frame_fixtures import WIDE
@@ -156,3 +156,16 @@ def test_a_corner_hidden_by_a_wardrobe_is_moved_where_the_wall_beside_it_ends() 
     # Wall seen on past the turn by more than furniture is deep: another wall's evidence.
     far = dataclasses.replace(wall, high=(runs > -2.0) & (runs < 4.0))
     np.testing.assert_allclose(_past_corner_fronts(chain, [far]), chain)
+
+
+def test_the_cells_a_camera_saw_through_reach_its_wall_but_not_past_a_stray_point() -> None:
+    view = CameraView.from_intrinsics(KINECT, LEVEL, np.zeros(3))
+    wall = np.column_stack([np.linspace(-1.5, 1.5, 300), np.full(300, 3.0)])
+    stray = np.array([[0.02, 6.0]])  # one point through a window
+    cells = swept_cells([view], np.vstack([wall, stray]), 0.25)
+    straight_ahead = cells[np.abs(cells[:, 0]) < 0.25]
+    assert straight_ahead[:, 1].min() < 0.25  # from the camera on
+    assert 2.5 < straight_ahead[:, 1].max() < 3.0  # up to the wall, not through it
+    assert not (np.abs(cells[:, 0]) > 2.5).any()  # nothing outside the camera's wedge
+    behind = swept_cells([view], np.array([[0.0, -3.0]]), 0.25)
+    assert len(behind) == 0  # a point behind the camera is not one it saw

@@ -10,6 +10,7 @@ from schemas.params import PipelineParams
 from services.evaluation import evaluate_result, keypoint_error
 from services.frame_layout import estimate_rgbd_layout, frame_points
 from services.frustum import CameraView, in_any_view, visible_band
+from services.local_layout import footprint_cells
 from services.pipeline import place_site
 from services.synthetic.furniture import Furnishing, Opening
 from services.synthetic.render import FrameSpec, frame_ground_truth_json, generate_frame_scene
@@ -109,3 +110,14 @@ def test_the_wall_of_the_next_room_seen_through_a_door_is_not_the_frames_wall(
     np.testing.assert_allclose(world[:, 0], 0.0, atol=0.05)  # on the wall x = 0
     half = distance * np.tan(np.arctan2(319.5, 525.0))  # the wall from edge to edge of view
     np.testing.assert_allclose(world[:, 1], [2.65 + half, 2.65 - half], atol=0.15)
+
+
+def test_a_frames_seen_space_reaches_back_to_its_camera() -> None:
+    # A level camera sees the floor only a few meters out; its rays crossed the space
+    # before that, and the placement must keep other frames' walls out of it too.
+    frame = three_frames(0).frames[0].frame
+    layout = estimate_rgbd_layout(frame)
+    aligned = frame_points(frame) @ layout.frame.rotation.T
+    near_camera = np.linalg.norm(layout.footprint, axis=1) < 0.5  # the camera is at 0
+    assert near_camera.any()
+    assert (np.linalg.norm(footprint_cells(aligned), axis=1) >= 0.5).all()
