@@ -31,6 +31,8 @@ _COST_METERS = 0.1  # tie-break: meters of covered wall per unit of path cost
 _SNAP_CELLS = 2.0  # a segment end this close to a deduced corner is merged into it
 _END_MATCH = 0.05  # m, a line this close to a chain's end wall is that wall's line
 _FOLLOW_MARGIN = 1.0  # m, more wall a frame's best-explaining chain must cover to be taken
+_MIN_UNSEEN = 0.5  # m, unseen wall an edge bridges to be left out of the second search
+_ON_SEGMENT = 0.01  # m, a node this close to an edge's segment lies on it
 _LOW_WALL_SHARE = 0.5  # how much a cell with wall points but not the wall's full height covers
 _UNKNOWN_COST = 0.5  # what a cell showing neither wall nor space behind it costs a chain
 
@@ -106,9 +108,9 @@ def _build_nodes(lines: list[WallLine]) -> _Nodes:
 
 def _edges(
     lines: list[WallLine], nodes: _Nodes, penalty: float
-) -> tuple[csr_matrix, csr_matrix, FloatArray]:
+) -> tuple[csr_matrix, csr_matrix, FloatArray, FloatArray]:
     """Directed WE-graph weights, undirected ST-graph lengths, and per directed edge the
-    wall it explains (m, see :func:`_best_path`).
+    wall it explains and the length of it where nothing was seen (m, see :func:`_best_path`).
 
     The ST-graph joins only neighbouring nodes along a line (across gaps up to the
     occlusion reach), so its spanning forest follows the walls instead of jumping back.
@@ -117,6 +119,7 @@ def _edges(
     we: dict[tuple[int, int], float] = {}
     st: dict[tuple[int, int], float] = {}
     cover = np.zeros((n, n))
+    unseen = np.zeros((n, n))
     # How many lines each node lies on: more than one makes it a corner.
     memberships = np.bincount(
         [node for members in nodes.on_line.values() for node in members], minlength=n
@@ -148,7 +151,8 @@ def _edges(
                     cover[u, v] = (
                         min(high, length) + _LOW_WALL_SHARE * low - _UNKNOWN_COST * unknown
                     ) * line.cell_size
-    return _sparse(we, n), _sparse(st, n), cover
+                    unseen[u, v] = unknown * line.cell_size
+    return _sparse(we, n), _sparse(st, n), cover, unseen
 
 
 def _st_link(
@@ -204,9 +208,35 @@ def _forest_path(we: csr_matrix, st: csr_matrix) -> tuple[list[int], float] | No
 
 
 def _best_path(
-    we: csr_matrix, cover: FloatArray, points: FloatArray
+    we: csr_matrix, cover: FloatArray, unseen: FloatArray, points: FloatArray
 ) -> tuple[list[int], float] | None:
-    """The directed simple path that explains the most wall.
+    """The directed simple path that explains the most wall (:func:`_most_wall_path`).
+
+    That search keeps one path per state, and a path through a state can block a better
+    one (it already holds the nodes the better one goes on to). The case that matters: a
+    scan that saw the room all around, where a path bridging the stretch the scan saw
+    nothing of holds the corner that the path opening at that stretch must start from; the
+    chain then opens in front of a cabinet, or short of a corner. So when edges bridge
+    ``_MIN_UNSEEN`` or more of unseen wall, the search runs again without them, and the path
+    explaining the most wall of the two wins (the same score: the chain is never worse by
+    it).
+    """
+    found = _most_wall_path(we, cover, points)
+    coo = we.tocoo()
+    bridges = unseen[coo.row, coo.col] >= _MIN_UNSEEN
+    if found is None or not bridges.any():
+        return None if found is None else (found[0], found[1])
+    keep = ~bridges
+    unbridged = csr_matrix((coo.data[keep], (coo.row[keep], coo.col[keep])), shape=we.shape)
+    other = _most_wall_path(unbridged, cover, points)
+    best = other if other is not None and other[2] > found[2] + 1e-9 else found
+    return best[0], best[1]
+
+
+def _most_wall_path(
+    we: csr_matrix, cover: FloatArray, points: FloatArray
+) -> tuple[list[int], float, float] | None:
+    """The directed simple path that explains the most wall: (nodes, paper's cost, score).
 
     Score of a path: covered high-evidence length, half the length where the wall shows only
     low (a cabinet hides its foot), less half the length where the scan saw neither wall nor
@@ -223,7 +253,9 @@ def _best_path(
     The search is label-correcting over states, one best simple path per state: a state
     is a node and the axis the path arrived along, numbered ``2 * node + axis`` (axis 0: x,
     1: y). A fragment may see closed loops of walls (a recess seen whole), so the path's
-    own nodes are excluded from its extensions.
+    own nodes are excluded from its extensions, and so are the nodes its edges pass over
+    (an edge joins any two nodes of a line): a chain never runs along the same stretch of
+    wall twice, counting its wall twice.
 
     cover: (n, n) high-evidence wall length of each edge, m; points: (n, 2) node
     coordinates.
@@ -237,10 +269,19 @@ def _best_path(
     axis = (step[:, 1] > step[:, 0]).astype(np.int64)
     gain = cover[u, v] - _COST_METERS * coo.data
     head_state = 2 * v + axis  # the state an edge leads into
-    value = np.full(2 * n, -np.inf)  # per state: score of its best path so far
-    on_path = np.zeros((2 * n, n), dtype=bool)  # per state: the nodes of that path
-    paths: list[list[int]] = [[] for _ in range(2 * n)]
     edges = np.arange(len(u))
+    # (E, n): the nodes on each edge's segment, its ends included.
+    along, across = points.T[axis], points.T[1 - axis]
+    lo = np.minimum(along[edges, u], along[edges, v])[:, None] - _ON_SEGMENT
+    hi = np.maximum(along[edges, u], along[edges, v])[:, None] + _ON_SEGMENT
+    span = (
+        (np.abs(across - across[edges, u][:, None]) < _ON_SEGMENT) & (along >= lo) & (along <= hi)
+    )
+    beyond_tail = span.copy()
+    beyond_tail[edges, u] = False
+    value = np.full(2 * n, -np.inf)  # per state: score of its best path so far
+    on_path = np.zeros((2 * n, n), dtype=bool)  # per state: the nodes its path holds or passes
+    paths: list[list[int]] = [[] for _ in range(2 * n)]
     start_here = 0  # option column 0: the path starts at the edge's tail
     for _ in range(2 * n + 1):
         # Each edge: start the path at its tail (column 0), or extend the path arriving
@@ -250,7 +291,8 @@ def _best_path(
         for arrival in (0, 1):
             tail_state = 2 * u + arrival
             extend = value[tail_state] - _CORNER_METERS * (axis != arrival)
-            options[:, arrival + 1] = np.where(on_path[tail_state, v], -np.inf, extend)
+            blocked = (on_path[tail_state] & beyond_tail).any(axis=1)
+            options[:, arrival + 1] = np.where(blocked, -np.inf, extend)
         choice = np.argmax(options, axis=1)
         candidate = options[edges, choice] + gain
         order = np.argsort(candidate)  # ascending: the best candidate per state lands last
@@ -262,22 +304,24 @@ def _best_path(
         if len(changed) == 0:
             break
         # Paths of the previous round: an update must not read a path changed in this one.
+        taken = edge_of[changed]
+        extended = choice[taken] != start_here
+        prefix_states = 2 * u[taken] + choice[taken] - 1
         prefixes = [
-            paths[2 * int(u[e]) + choice[e] - 1] if choice[e] != start_here else [int(u[e])]
-            for e in edge_of[changed]
+            paths[state] if extends else [int(u[e])]
+            for e, state, extends in zip(taken, prefix_states, extended, strict=True)
         ]
-        for updated, prefix in zip(changed, prefixes, strict=True):
-            path = [*prefix, int(v[edge_of[updated]])]
-            paths[updated] = path
-            on_path[updated] = False
-            on_path[updated, path] = True
+        covered = span[taken] | (on_path[prefix_states] & extended[:, None])
+        for updated, prefix, e in zip(changed, prefixes, taken, strict=True):
+            paths[updated] = [*prefix, int(v[e])]
+        on_path[changed] = covered
         value[changed] = best[changed]
     final = int(np.argmax(value))
     if not np.isfinite(value[final]):
         return None
     path = paths[final]
     cost = float(sum(we[a, b] for a, b in itertools.pairwise(path)))
-    return path, cost
+    return path, cost, float(value[final])
 
 
 def _corners_only(points: FloatArray) -> FloatArray:
@@ -344,16 +388,16 @@ def find_wall_chain(
     if not lines:
         return None
     nodes = _build_nodes(lines)
-    we, st, cover = _edges(lines, nodes, params.complexity_penalty)
+    we, st, cover, unseen = _edges(lines, nodes, params.complexity_penalty)
     node_points = np.asarray(nodes.points)
     found = _frustum_path(we, node_points, views) if views else None
     if found is not None:
-        best = _best_path(we, cover, node_points)
+        best = _best_path(we, cover, unseen, node_points)
         found = _closer_to_the_walls(found, best, cover, node_points)
     if found is None and params.source_target == "spanning_forest":
         found = _forest_path(we, st)
     elif found is None:
-        found = _best_path(we, cover, node_points)
+        found = _best_path(we, cover, unseen, node_points)
     if found is None:
         return None
     order, cost = found

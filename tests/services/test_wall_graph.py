@@ -187,7 +187,17 @@ def _room_seen_all_around(bottom_low: tuple[float, float], top_gap: tuple[float,
 
 @pytest.mark.parametrize(
     ("top_gap", "cabinet"),
-    [((1.0, 2.5), (4.5, 5.5)), ((1.5, 3.0), (3.5, 4.5)), ((2.0, 3.5), (3.5, 4.5))],
+    [
+        ((1.0, 2.5), (4.5, 5.5)),
+        ((1.5, 3.0), (3.5, 4.5)),
+        ((2.0, 3.5), (3.5, 4.5)),
+        # The chain opening at the unseen stretch starts 1.5 m or more before its first
+        # corner: the path bridging the stretch held that corner in the one-path-per-state
+        # search, so these opened at the cabinet until the search ran again without bridges.
+        ((1.5, 3.0), (4.5, 5.5)),
+        ((2.5, 4.0), (3.5, 4.5)),
+        ((3.0, 4.5), (4.5, 5.5)),
+    ],
 )
 def test_a_chain_seen_all_around_opens_where_nothing_was_seen(top_gap, cabinet):
     # Neither stretch has high evidence; only the top one shows no wall at all. A cabinet in
@@ -198,3 +208,26 @@ def test_a_chain_seen_all_around_opens_where_nothing_was_seen(top_gap, cabinet):
     corners = [[0.0, 0.0], [6.0, 0.0], [6.0, 4.0]]
     assert any(np.allclose(chain.keypoints[k : k + 3], corners, atol=0.1) for k in range(3))
     assert np.allclose(chain.keypoints[-1], [top_gap[1], 4.0], atol=0.1)
+
+
+@pytest.mark.parametrize("split", [0.5, 1.0, 2.0])
+def test_a_chain_opens_at_the_unseen_stretch_however_many_edges_bridge_it(split):
+    # The top wall's seen part left of the gap is two runs meeting at ``split``: a node lies
+    # there, so several edges bridge the gap, and a path bridging it held the corner the
+    # right chain starts from (the best chain did not even bridge it when split = 2).
+    top_spans = [(0.0, split), (split, 2.5), (4.0, 6.0)]
+    bottom = _line(0, 0.0, 1, [(0.0, 6.0)])
+    bottom = dataclasses.replace(
+        bottom, occupied=_flags(bottom, [(0.0, 6.0)]), seen_through=_flags(bottom, [])
+    )
+    top = _line(0, 4.0, -1, top_spans)
+    top = dataclasses.replace(top, occupied=_flags(top, top_spans), seen_through=_flags(top, []))
+    sides = [_line(1, 6.0, 1, [(0.0, 4.0)]), _line(1, 0.0, -1, [(0.0, 4.0)])]
+    sides = [
+        dataclasses.replace(s, occupied=s.high.copy(), seen_through=_flags(s, [])) for s in sides
+    ]
+    chain = find_wall_chain([bottom, top, *sides], LayoutParams())
+    assert chain is not None
+    assert np.allclose(chain.keypoints[0], [2.5, 4.0], atol=0.1)
+    assert np.allclose(chain.keypoints[-1], [4.0, 4.0], atol=0.1)
+    assert len(chain.keypoints) == 6  # once around, no wall run twice
