@@ -163,26 +163,31 @@ def _flags(line: WallLine, spans: list[tuple[float, float]]) -> np.ndarray:
     return flags
 
 
-def _room_seen_all_around(bottom_low: tuple[float, float], top_gap: tuple[float, float]):
-    """A 6 x 4 m room seen all around, interior inside. On the bottom wall a cabinet hides
-    the lower part over ``bottom_low`` (wall points above it, none high enough to be high
-    evidence); on the top wall nothing at all was seen over ``top_gap`` (no wall points,
-    no space behind the line): where the scan stopped."""
-    bottom = _line(0, 0.0, 1, [(0.0, bottom_low[0]), (bottom_low[1], 6.0)])
+def _seen_room(bottom_high: list[tuple[float, float]], top_spans: list[tuple[float, float]]):
+    """A 6 x 4 m room seen all around, interior inside. The bottom wall holds wall points
+    all along, high evidence only over ``bottom_high``; the top wall holds wall points (all
+    high) only over ``top_spans``, and between them the scan saw nothing (no wall points, no
+    space behind the line). The sides are seen whole."""
+    bottom = _line(0, 0.0, 1, bottom_high)
     bottom = dataclasses.replace(
         bottom, occupied=_flags(bottom, [(0.0, 6.0)]), seen_through=_flags(bottom, [])
     )
-    top = _line(0, 4.0, -1, [(0.0, top_gap[0]), (top_gap[1], 6.0)])
-    top = dataclasses.replace(
-        top,
-        occupied=_flags(top, [(0.0, top_gap[0]), (top_gap[1], 6.0)]),
-        seen_through=_flags(top, []),
-    )
+    top = _line(0, 4.0, -1, top_spans)
+    top = dataclasses.replace(top, occupied=_flags(top, top_spans), seen_through=_flags(top, []))
     sides = [_line(1, 6.0, 1, [(0.0, 4.0)]), _line(1, 0.0, -1, [(0.0, 4.0)])]
     sides = [
         dataclasses.replace(s, occupied=s.high.copy(), seen_through=_flags(s, [])) for s in sides
     ]
     return [bottom, top, *sides]
+
+
+def _room_seen_all_around(bottom_low: tuple[float, float], top_gap: tuple[float, float]):
+    """The room of :func:`_seen_room` with a cabinet hiding the bottom wall's lower part
+    over ``bottom_low`` (wall points above it, none high enough to be high evidence) and
+    nothing seen of the top wall over ``top_gap``: where the scan stopped."""
+    return _seen_room(
+        [(0.0, bottom_low[0]), (bottom_low[1], 6.0)], [(0.0, top_gap[0]), (top_gap[1], 6.0)]
+    )
 
 
 @pytest.mark.parametrize(
@@ -215,18 +220,8 @@ def test_a_chain_opens_at_the_unseen_stretch_however_many_edges_bridge_it(split)
     # The top wall's seen part left of the gap is two runs meeting at ``split``: a node lies
     # there, so several edges bridge the gap, and a path bridging it held the corner the
     # right chain starts from (the best chain did not even bridge it when split = 2).
-    top_spans = [(0.0, split), (split, 2.5), (4.0, 6.0)]
-    bottom = _line(0, 0.0, 1, [(0.0, 6.0)])
-    bottom = dataclasses.replace(
-        bottom, occupied=_flags(bottom, [(0.0, 6.0)]), seen_through=_flags(bottom, [])
-    )
-    top = _line(0, 4.0, -1, top_spans)
-    top = dataclasses.replace(top, occupied=_flags(top, top_spans), seen_through=_flags(top, []))
-    sides = [_line(1, 6.0, 1, [(0.0, 4.0)]), _line(1, 0.0, -1, [(0.0, 4.0)])]
-    sides = [
-        dataclasses.replace(s, occupied=s.high.copy(), seen_through=_flags(s, [])) for s in sides
-    ]
-    chain = find_wall_chain([bottom, top, *sides], LayoutParams())
+    room = _seen_room([(0.0, 6.0)], [(0.0, split), (split, 2.5), (4.0, 6.0)])
+    chain = find_wall_chain(room, LayoutParams())
     assert chain is not None
     assert np.allclose(chain.keypoints[0], [2.5, 4.0], atol=0.1)
     assert np.allclose(chain.keypoints[-1], [4.0, 4.0], atol=0.1)

@@ -192,6 +192,11 @@ def test_boundary_mismatch_of_the_same_profile_is_low():
     assert boundary_mismatch(*_pair(cabinet, _profile(rng)), params) > 0.9
 
 
+def _as_frames(pair: tuple[Piece, Piece]) -> tuple[Piece, Piece]:
+    a, b = pair
+    return dataclasses.replace(a, evidence="frame"), dataclasses.replace(b, evidence="frame")
+
+
 def test_frames_compare_only_the_part_of_the_section_both_saw():
     rng = np.random.default_rng(22)
     params = PlacementParams()
@@ -199,17 +204,11 @@ def test_frames_compare_only_the_part_of_the_section_both_saw():
     near = near[(near[:, 2] < 1.2) & (near[:, 1] < 0.6)]  # close by: low wall, little floor
     far = _profile(rng)
     clouds = boundary_mismatch(*_pair(near, far), params)
-    a, b = _pair(near, far)
-    framed = boundary_mismatch(
-        dataclasses.replace(a, evidence="frame"), dataclasses.replace(b, evidence="frame"), params
-    )
+    framed = boundary_mismatch(*_as_frames(_pair(near, far)), params)
     assert framed < 0.1 < clouds
     # What both saw still tells a cabinet from a bare wall.
     cabinet = _profile(rng, extra=((0.0, 0.5), (0.0, 0.9)))
-    a, b = _pair(near, cabinet)
-    framed_cabinet = boundary_mismatch(
-        dataclasses.replace(a, evidence="frame"), dataclasses.replace(b, evidence="frame"), params
-    )
+    framed_cabinet = boundary_mismatch(*_as_frames(_pair(near, cabinet)), params)
     assert framed_cabinet > framed + 0.1
 
 
