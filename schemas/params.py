@@ -211,6 +211,20 @@ class PlacementParams(_Frozen):
         description="the same map for clouds thinner than layout.min_calibrated_points "
         "(bench/sensor_stress.py --fit, tune seeds)",
     )
+    loose_room_slack: float = Field(
+        0.7,
+        gt=0,
+        description="a main room whose pieces the junctions leave free to slide by this much "
+        "or more (one standard deviation, in units of 5 % of its diagonal: "
+        "services.confidence.room_slack) is a loose room: its size is a guess",
+    )
+    loose_room_confidence: float = Field(
+        0.75,
+        ge=0,
+        le=1,
+        description="the most a loose room's confidence can be: of the tune split's rooms "
+        "calibrated at 0.95 or more, 6 of the 8 loose ones were right (81 of 82 others)",
+    )
     closed_confidence: float = Field(
         0.95,
         gt=0,

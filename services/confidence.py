@@ -15,12 +15,16 @@ wrong about one in four against one in thirteen; clouds of under 15 000 points) 
 ways no placement term sees, so rooms of them get a second, linear map of that logit per
 kind, fitted on tune seeds of the frames and the other-scanners benchmarks. The other rooms
 share what is left in proportion to their shares, none likelier than the main room.
+
+A room whose pieces the junctions leave free to slide (its length fixed only by the model
+of what cuts hide, ``room_slack``) can be the only assembly and still the wrong size: its
+confidence is capped at what such rooms scored on the tune split.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +33,7 @@ from schemas.params import PlacementParams
 from services.evaluation import polygon_keypoint_error
 from services.layout_model import build_polygon
 from services.placement import Piece, Placement, PlacementCandidate, translations_of
+from services.refinement import translation_spread
 from services.types import FloatArray
 
 __all__ = [
@@ -37,6 +42,8 @@ __all__ = [
     "calibration_features",
     "fragment_confidences",
     "rank_assemblies",
+    "room_slack",
+    "same_room",
     "same_room_groups",
 ]
 
@@ -44,6 +51,7 @@ CALIBRATION_FEATURES = (
     "bias", "logit share", "pieces", "closure", "conflict", "turns", "truncated",
 )  # fmt: skip
 _SHARE_CLIP = 1e-4
+_RIGHT_SHARE = 0.05  # the paper's test: mean keypoint error under 5 % of the diagonal
 
 
 @dataclass(frozen=True)
@@ -81,7 +89,7 @@ def same_room_groups(
     for cand in candidates:
         moved = translations_of(pieces, cand)
         polygon = build_polygon([by_id[fid] for fid in cand.order], cand.rotations, moved)
-        match = next((g for g, p in enumerate(polygons) if _same_room(polygon, p, share)), None)
+        match = next((g for g, p in enumerate(polygons) if same_room(polygon, p, share)), None)
         if match is None:
             match = len(polygons)
             translations.append(moved)
@@ -106,6 +114,23 @@ def calibration_features(
             float(truncated),
         ]
     )
+
+
+def room_slack(
+    pieces: Sequence[Piece],
+    candidate: PlacementCandidate,
+    polygon: FloatArray,
+    measured: Mapping[tuple[str, str], float],
+    params: PlacementParams,
+) -> float:
+    """How freely the room's pieces may still slide (``translation_spread``), in units of
+    the error the paper's test allows a floorplan of that size (5 % of its diagonal). Near
+    1 or above, the room's size is a guess however clear the assembly is."""
+    by_id = {p.id: p for p in pieces}
+    ordered = [by_id[fid] for fid in candidate.order]
+    spread = translation_spread(ordered, candidate.rotations, params, measured)
+    span = polygon.max(axis=0) - polygon.min(axis=0) if len(polygon) else np.zeros(2)
+    return spread / max(_RIGHT_SHARE * float(np.linalg.norm(span)), 1e-6)
 
 
 def rank_assemblies(
@@ -147,6 +172,11 @@ def rank_assemblies(
     z = float(np.asarray(params.confidence_coefficients) @ inputs)
     z += _evidence_shift(pieces, z, params)
     confidence = 1.0 / (1.0 + math.exp(-z))
+    # A room whose size the junctions leave loose is a guess the calibration does not see.
+    if room_slack(pieces, firsts[main], polygons[main], placement.measured, params) >= (
+        params.loose_room_slack
+    ):
+        confidence = min(confidence, params.loose_room_confidence)
     return [
         Assembly(
             firsts[g],
@@ -218,7 +248,7 @@ def _poses(assembly: Assembly) -> dict[str, tuple[int, FloatArray]]:
     }
 
 
-def _same_room(a: FloatArray, b: FloatArray, share: float) -> bool:
+def same_room(a: FloatArray, b: FloatArray, share: float) -> bool:
     """True when two floorplans (same frame) are one room within ``share`` of the diagonal."""
     if len(a) < 3 or len(b) < 3:
         return False

@@ -26,7 +26,7 @@ from schemas.result import (
     ResultModel,
     RoomModel,
 )
-from services.confidence import Assembly, fragment_confidences, rank_assemblies
+from services.confidence import Assembly, fragment_confidences, rank_assemblies, same_room
 from services.fragments import Fragment, fragment_layout, fragment_points
 from services.frame_merge import FrameGroup, expand_frame_groups, group_frames, group_layout
 from services.geometry import is_simple_rectilinear
@@ -44,7 +44,7 @@ from services.placement import (
     rot90,
 )
 from services.placement.priors import chain_placement, fit_frame, wrap_angle
-from services.refinement import Refinement, refine_translations
+from services.refinement import Refinement, refine_translations, widest_slide
 from services.registration import premerge
 from services.rgbd import RgbdFrame
 from services.types import FloatArray, LocalLayout, ParsedFragment, ProgressFn
@@ -150,10 +150,7 @@ def _concrete(
     else:
         # An open chain is already joined end to end; there is no loop to refine.
         refined = Refinement(translations, "skipped: open chain", 0.0, 0.0)
-    poses = {
-        fid: fragment_pose(layouts[fid], rotation, refined.translations[k])
-        for k, (fid, rotation) in enumerate(zip(cand.order, cand.rotations, strict=True))
-    }
+    poses = _poses(layouts, cand, refined.translations)
     polygon = None
     if (
         cand.missing == 0
@@ -165,6 +162,16 @@ def _concrete(
         polygon = build_polygon(ordered, cand.rotations, refined.translations)
     rectilinear = polygon is not None and is_simple_rectilinear(polygon)
     return _Placed(assembly, cand, refined, poses, polygon, rectilinear)
+
+
+def _poses(
+    layouts: Mapping[str, LocalLayout], cand: PlacementCandidate, translations: FloatArray
+) -> dict[str, FloatArray]:
+    """Each fragment's pose in the site frame: its rotation and its source's position."""
+    return {
+        fid: fragment_pose(layouts[fid], rotation, translations[k])
+        for k, (fid, rotation) in enumerate(zip(cand.order, cand.rotations, strict=True))
+    }
 
 
 def _gap(ordered: Sequence[Piece], cand: PlacementCandidate, translations: FloatArray) -> float:
@@ -304,6 +311,55 @@ def _choose(
     return closing[0], closing[1:], assemblies
 
 
+_SLIDE_SIGMAS = 2.0  # how far a slid runner-up moves, in the slide's standard deviations
+
+
+def _slid_rooms(
+    main: _Placed,
+    layouts: Mapping[str, LocalLayout],
+    pieces: Mapping[str, Piece],
+    params: PipelineParams,
+    measured: Mapping[tuple[str, str], float],
+) -> list[_Placed]:
+    """The runners-up of a lone closed room we doubt: the same assembly with its pieces slid
+    ``_SLIDE_SIGMAS`` standard deviations either way along the direction the junctions pin
+    down least (``widest_slide``), each taking half of the doubt (at most the main room's
+    own probability). The pieces close into one room only, but where its size is a guess
+    the room may be that much longer or shorter, or a fragment elsewhere along its wall:
+    "not sure, here are the candidates". None when a slide that far moves neither the room
+    nor any fragment by what tells two rooms apart (the doubt is elsewhere), or leaves no
+    simple rectilinear floorplan."""
+    if main.assembly is None or main.polygon is None or not main.rectilinear:
+        return []
+    cand = main.candidate
+    ordered = [pieces[fid] for fid in cand.order]
+    move = widest_slide(ordered, cand.rotations, params.placement, measured)
+    sure = main.assembly.probability
+    doubt = min((1.0 - sure) / 2.0, sure)  # never likelier than the main room
+    out = []
+    share = params.placement.same_room_share
+    reach = share * float(np.linalg.norm(np.ptp(main.polygon, axis=0)))
+    for sign in (1.0, -1.0):
+        translations = main.refinement.translations + sign * _SLIDE_SIGMAS * move
+        polygon = build_polygon(ordered, cand.rotations, translations)
+        # A piece sliding along its own wall moves its fragment, not the floorplan: a
+        # runner-up for the fleet all the same.
+        moved = float(np.abs(_SLIDE_SIGMAS * move).sum(axis=1).max()) > reach
+        if not is_simple_rectilinear(polygon) or (
+            same_room(polygon, main.polygon, share) and not moved
+        ):
+            continue
+        poses = _poses(layouts, cand, translations)
+        assembly = dataclasses.replace(
+            main.assembly, members=1, share=0.0, probability=doubt, polygon=polygon
+        )
+        refined = dataclasses.replace(
+            main.refinement, translations=translations, status="slid along its loosest direction"
+        )
+        out.append(_Placed(assembly, cand, refined, poses, polygon))
+    return out
+
+
 def _reported(
     alternatives: Sequence[_Placed], status: str, params: PipelineParams
 ) -> list[_Placed]:
@@ -382,6 +438,13 @@ def place_site(
         )
     report("refinement", 0.7)
     main, alternatives, assemblies = _choose(layouts, pieces, placement, params, site_hints)
+    slid = 0
+    doubted = main.assembly is not None and (
+        main.assembly.probability < params.placement.closed_confidence
+    )
+    if doubted and not alternatives:
+        alternatives = _slid_rooms(main, layouts, pieces, params, placement.measured)
+        slid = len(alternatives)
     if site_hints.priors:
         main = _to_hints_frame(main, site_hints, layouts)
         alternatives = [_to_hints_frame(alt, site_hints, layouts) for alt in alternatives]
@@ -404,6 +467,8 @@ def place_site(
     diagnostics["evidence"] = {kind: kinds.count(kind) for kind in sorted(set(kinds))}
     if status == "open" and main.polygon is not None:
         diagnostics["unconfirmed_polygon"] = main.polygon.tolist()
+    if slid:
+        diagnostics["slid_alternatives"] = slid  # the runners-up are this room resized
     if main.polygon is not None and not main.rectilinear:
         diagnostics["floorplan_not_rectilinear"] = True  # why it is not said closed
     report("done", 1.0)

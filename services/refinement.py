@@ -35,7 +35,13 @@ from services.placement.evidence import end_voxels, register_ends
 from services.placement.pieces import UNIT
 from services.types import FloatArray
 
-__all__ = ["Refinement", "measured_shifts", "refine_translations"]
+__all__ = [
+    "Refinement",
+    "measured_shifts",
+    "refine_translations",
+    "translation_spread",
+    "widest_slide",
+]
 
 _MARGIN = 1e-3  # m, turns the paper's strict inequalities into solvable ones
 _OFFSET_SLACK = 0.10  # m, largest offset mismatch left between walls joined in parallel
@@ -230,6 +236,61 @@ def refine_translations(
         kept = [None if miss else shift for shift, miss in zip(shifts, missed, strict=True)]
         refined = _refine(sites, pieces, rotations, translations, noise, kept)
     return refined
+
+
+def translation_spread(
+    pieces: Sequence[Piece],
+    rotations: Sequence[int],
+    params: PlacementParams = PlacementParams(),
+    measured: Mapping[tuple[str, str], float] | None = None,
+) -> float:
+    """How far the junctions leave the pieces free to move: the root mean square, over the
+    pieces in loop order (the first fixed), of the standard deviation of each one's position
+    under the QP's junction model (m; inequalities left out).
+
+    Where every junction hides an unseen stretch and none is measured, the loop's closure
+    may fix only the sum of those stretches: the pieces can slide along a wall, and the
+    room's length is then a guess of the model's (two pieces cut mid-wall on opposite
+    walls, or meeting at hidden corners). A result resting on such a guess is no surer of
+    its floorplan than this spread allows, however few rival assemblies there are.
+    """
+    n = len(pieces)
+    if n < 2:
+        return 0.0
+    covariance = _covariance(pieces, rotations, params, measured)
+    return float(np.sqrt(np.trace(covariance) / n))
+
+
+def widest_slide(
+    pieces: Sequence[Piece],
+    rotations: Sequence[int],
+    params: PlacementParams = PlacementParams(),
+    measured: Mapping[tuple[str, str], float] | None = None,
+) -> FloatArray:
+    """(n, 2) the move of every piece (the first stays) one standard deviation along the
+    direction the junction model leaves the loosest: how the room most likely differs
+    from the refined one when its size is a guess (see :func:`translation_spread`)."""
+    n = len(pieces)
+    if n < 2:
+        return np.zeros((n, 2))
+    values, vectors = np.linalg.eigh(_covariance(pieces, rotations, params, measured))
+    move = vectors[:, -1] * np.sqrt(max(float(values[-1]), 0.0))
+    return np.vstack([np.zeros(2), move.reshape(n - 1, 2)])
+
+
+def _covariance(
+    pieces: Sequence[Piece],
+    rotations: Sequence[int],
+    params: PlacementParams,
+    measured: Mapping[tuple[str, str], float] | None,
+) -> FloatArray:
+    """(2n - 2, 2n - 2) covariance of the pieces' positions after the first under the
+    junction model alone (the QP's least-squares rows; the first piece is the frame)."""
+    sites = [p.keypoints @ rot90(r).T for p, r in zip(pieces, rotations, strict=True)]
+    shifts = measured_shifts(pieces, rotations, measured)
+    problem = _junction_rows(sites, pieces, rotations, JunctionNoise.from_params(params), shifts)
+    free = problem.J[:, 2:]
+    return np.asarray(np.linalg.inv(free.T @ free))
 
 
 def _missed_shifts(

@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from schemas.params import PlacementParams
 from services.placement import place_pieces, rot90, translations_of
 from services.placement.search import evaluate_placement
-from services.refinement import measured_shifts, refine_translations
+from services.refinement import measured_shifts, refine_translations, translation_spread
 from tests.conftest import chains_from_polygon, overlapping_halves
 
 pytestmark = pytest.mark.timeout(60)
@@ -97,3 +98,26 @@ def test_the_placements_measurements_are_the_ones_the_refinement_takes():
         ordered, rotations, placement.translations, measured=placement.measured
     )
     assert np.array_equal(again.translations, taken.translations)
+
+
+def test_pieces_free_to_slide_have_a_wide_spread_that_a_measured_overlap_narrows():
+    # Two halves cut on opposite walls: closing the loop fixes only the sum of the two
+    # junctions' overlaps, so the second half may slide along the walls by the overlap
+    # model's spread. Where one end's structure measures its overlap, the slide is pinned.
+    free = overlapping_halves(False)
+    pinned = overlapping_halves(True)
+    assert measured_shifts(free, [0, 0]) == [None, None]
+    spread_free = translation_spread(free, [0, 0])
+    spread_pinned = translation_spread(pinned, [0, 0])
+    params = PlacementParams()
+    # Half the slide's variance: two junctions of that spread share it (and the first piece,
+    # the frame, does not move at all).
+    slide = np.hypot(params.junction_sigma, params.keypoint_sigma) / np.sqrt(2.0)
+    assert spread_free == pytest.approx(slide / np.sqrt(2.0), rel=0.2)
+    assert spread_pinned < 0.5 * spread_free
+
+
+def test_a_lone_piece_has_no_spread():
+    square = np.array([[0, 0], [6, 0], [6, 6], [0, 6]], dtype=np.float64)
+    (whole,) = chains_from_polygon(square, [1.0], [0])
+    assert translation_spread([whole], [0]) == 0.0
