@@ -40,6 +40,7 @@ __all__ = [
     "CALIBRATION_FEATURES",
     "Assembly",
     "calibration_features",
+    "floorplan_diagonal",
     "fragment_confidences",
     "rank_assemblies",
     "room_slack",
@@ -129,8 +130,7 @@ def room_slack(
     by_id = {p.id: p for p in pieces}
     ordered = [by_id[fid] for fid in candidate.order]
     spread = translation_spread(ordered, candidate.rotations, params, measured)
-    span = polygon.max(axis=0) - polygon.min(axis=0) if len(polygon) else np.zeros(2)
-    return spread / max(_RIGHT_SHARE * float(np.linalg.norm(span)), 1e-6)
+    return spread / max(_RIGHT_SHARE * floorplan_diagonal(polygon), 1e-6)
 
 
 def rank_assemblies(
@@ -225,8 +225,7 @@ def fragment_confidences(
     diagonal. Poses are compared in the search's frame, where the first fragment is fixed
     in every assembly (so its own confidence is the mass of all the rooms found).
     """
-    span = main.polygon.max(axis=0) - main.polygon.min(axis=0) if len(main.polygon) else 0.0
-    tolerance = share * float(np.linalg.norm(span))
+    tolerance = share * floorplan_diagonal(main.polygon)
     reference = _poses(main)
     out = dict.fromkeys(reference, 0.0)
     for assembly in assemblies:
@@ -252,6 +251,11 @@ def same_room(a: FloatArray, b: FloatArray, share: float) -> bool:
     """True when two floorplans (same frame) are one room within ``share`` of the diagonal."""
     if len(a) < 3 or len(b) < 3:
         return False
-    both = np.vstack([a, b])
-    diagonal = float(np.linalg.norm(both.max(axis=0) - both.min(axis=0)))
-    return polygon_keypoint_error(a, b) < share * diagonal
+    return polygon_keypoint_error(a, b) < share * floorplan_diagonal(np.vstack([a, b]))
+
+
+def floorplan_diagonal(polygon: FloatArray) -> float:
+    """Length of the diagonal of a floorplan's (V, 2) bounding box, m (0 when empty)."""
+    if not len(polygon):
+        return 0.0
+    return float(np.linalg.norm(polygon.max(axis=0) - polygon.min(axis=0)))

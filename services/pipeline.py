@@ -26,7 +26,13 @@ from schemas.result import (
     ResultModel,
     RoomModel,
 )
-from services.confidence import Assembly, fragment_confidences, rank_assemblies, same_room
+from services.confidence import (
+    Assembly,
+    floorplan_diagonal,
+    fragment_confidences,
+    rank_assemblies,
+    same_room,
+)
 from services.fragments import Fragment, fragment_layout, fragment_points
 from services.frame_merge import FrameGroup, expand_frame_groups, group_frames, group_layout
 from services.geometry import is_simple_rectilinear
@@ -336,15 +342,15 @@ def _slid_rooms(
     move = widest_slide(ordered, cand.rotations, params.placement, measured)
     sure = main.assembly.probability
     doubt = min((1.0 - sure) / 2.0, sure)  # never likelier than the main room
-    out = []
     share = params.placement.same_room_share
-    reach = share * float(np.linalg.norm(np.ptp(main.polygon, axis=0)))
+    # A piece sliding along its own wall moves its fragment, not the floorplan: a runner-up
+    # for the fleet all the same.
+    reach = share * floorplan_diagonal(main.polygon)
+    moved = float(np.abs(_SLIDE_SIGMAS * move).sum(axis=1).max()) > reach
+    out = []
     for sign in (1.0, -1.0):
         translations = main.refinement.translations + sign * _SLIDE_SIGMAS * move
         polygon = build_polygon(ordered, cand.rotations, translations)
-        # A piece sliding along its own wall moves its fragment, not the floorplan: a
-        # runner-up for the fleet all the same.
-        moved = float(np.abs(_SLIDE_SIGMAS * move).sum(axis=1).max()) > reach
         if not is_simple_rectilinear(polygon) or (
             same_room(polygon, main.polygon, share) and not moved
         ):
