@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+import zenoh
 from zenoh.ext import Int64, z_serialize
 
 from api.zenoh import ros2
@@ -142,7 +143,11 @@ def test_ros2_robot_clouds_become_fragments_and_poses_come_back(
         cloud_key = ros2.topic_key(0, ROS_CLOUD_TOPIC, ros2.CLOUD_TYPE, cloud_hash)
         with (
             session.declare_subscriber(pose_key, on_pose),
-            session.declare_publisher(cloud_key) as publisher,
+            # A reliable ROS publisher (rmw_zenoh's default QoS) blocks under congestion: a
+            # burst of three clouds must not lose one, as the default (drop) once did in CI.
+            session.declare_publisher(
+                cloud_key, congestion_control=zenoh.CongestionControl.BLOCK
+            ) as publisher,
         ):
             wait_until(lambda: publisher.matching_status.matching, 10)  # type: ignore[attr-defined]
             gid = ros2.entity_gid("test robot publisher")
