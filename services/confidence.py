@@ -123,18 +123,23 @@ def room_slack(
     polygon: FloatArray,
     measured: Mapping[tuple[str, str], float],
     params: PlacementParams,
+    prior_sigmas: Mapping[str, float] | None = None,
 ) -> float:
-    """How freely the room's pieces may still slide (``translation_spread``), in units of
-    the error the paper's test allows a floorplan of that size (5 % of its diagonal). Near
-    1 or above, the room's size is a guess however clear the assembly is."""
+    """How freely the room's pieces may still slide (``translation_spread``; with the
+    hinted pieces' prior sigmas by id), in units of the error the paper's test allows a
+    floorplan of that size (5 % of its diagonal). Near 1 or above, the room's size is a
+    guess however clear the assembly is."""
     by_id = {p.id: p for p in pieces}
     ordered = [by_id[fid] for fid in candidate.order]
-    spread = translation_spread(ordered, candidate.rotations, params, measured)
+    spread = translation_spread(ordered, candidate.rotations, params, measured, prior_sigmas)
     return spread / max(_RIGHT_SHARE * floorplan_diagonal(polygon), 1e-6)
 
 
 def rank_assemblies(
-    pieces: Sequence[Piece], placement: Placement, params: PlacementParams, known: int = 0
+    pieces: Sequence[Piece],
+    placement: Placement,
+    params: PlacementParams,
+    prior_sigmas: Mapping[str, float] | None = None,
 ) -> list[Assembly]:
     """The distinct closed assemblies of a placement, most probable first.
 
@@ -145,9 +150,11 @@ def rank_assemblies(
     params : same-room share, 'none of these' energy, calibration coefficients, and the
         maps of the logit for frames and thin clouds (each in the share of pieces of its
         kind).
-    known : pieces whose place a prior pose tells. The 'none of these' share and the
+    prior_sigmas : the standard deviation (m) of each piece's prior position, by id, for
+        the pieces whose place a prior pose tells. The 'none of these' share and the
         calibration grow with the pieces the search had to place itself (fitted without
-        hints); a piece the fleet already placed is not one of those.
+        hints); a piece the fleet already placed is not one of those. Two priors or more
+        also pin the pieces' positions that the junctions leave loose (``room_slack``).
 
     Returns
     -------
@@ -161,7 +168,8 @@ def rank_assemblies(
     weights = np.zeros(len(polygons))
     for cand, group in zip(complete, groups, strict=True):
         weights[group] += math.exp(-(cand.energy - lowest))
-    free = max(1, len(pieces) - known)
+    sigmas = prior_sigmas or {}
+    free = max(1, len(pieces) - sum(p.id in sigmas for p in pieces))
     unexplored = params.unexplored_energy + params.unexplored_per_piece * free
     shares = weights / (weights.sum() + math.exp(-unexplored))
     firsts = [complete[groups.index(g)] for g in range(len(polygons))]
@@ -173,9 +181,8 @@ def rank_assemblies(
     z += _evidence_shift(pieces, z, params)
     confidence = 1.0 / (1.0 + math.exp(-z))
     # A room whose size the junctions leave loose is a guess the calibration does not see.
-    if room_slack(pieces, firsts[main], polygons[main], placement.measured, params) >= (
-        params.loose_room_slack
-    ):
+    slack = room_slack(pieces, firsts[main], polygons[main], placement.measured, params, sigmas)
+    if slack >= params.loose_room_slack:
         confidence = min(confidence, params.loose_room_confidence)
     return [
         Assembly(

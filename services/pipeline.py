@@ -49,8 +49,13 @@ from services.placement import (
     place_pieces,
     rot90,
 )
-from services.placement.priors import chain_placement, fit_frame, wrap_angle
-from services.refinement import Refinement, refine_translations, widest_slide
+from services.placement.priors import (
+    chain_placement,
+    fit_frame,
+    priors_in_site_frame,
+    wrap_angle,
+)
+from services.refinement import Anchor, Refinement, refine_translations, widest_slide
 from services.registration import premerge
 from services.rgbd import RgbdFrame
 from services.types import FloatArray, LocalLayout, ParsedFragment, ProgressFn
@@ -144,14 +149,17 @@ def _concrete(
     translations: FloatArray,
     params: PipelineParams,
     measured: Mapping[tuple[str, str], float],
+    hints: SiteHints,
     assembly: Assembly | None = None,
 ) -> _Placed:
     """Refine an assembly's translations and build its poses and floorplan (``measured``:
-    the overlaps the placement measured, ``Placement.measured``)."""
+    the overlaps the placement measured, ``Placement.measured``; the hints' prior poses
+    anchor the refinement)."""
     ordered = [pieces[fid] for fid in cand.order]
     if cand.missing == 0:
+        anchors = _anchors(hints, cand, translations)
         refined = refine_translations(
-            ordered, cand.rotations, translations, params.placement, measured
+            ordered, cand.rotations, translations, params.placement, measured, anchors
         )
     else:
         # An open chain is already joined end to end; there is no loop to refine.
@@ -168,6 +176,22 @@ def _concrete(
         polygon = build_polygon(ordered, cand.rotations, refined.translations)
     rectilinear = polygon is not None and is_simple_rectilinear(polygon)
     return _Placed(assembly, cand, refined, poses, polygon, rectilinear)
+
+
+def _anchors(
+    hints: SiteHints, cand: PlacementCandidate, translations: FloatArray
+) -> list[Anchor | None]:
+    """The prior position of each piece's source in the site frame (loop order; None
+    without a prior), through the hints' frame fitted to the unrefined assembly."""
+    if len(hints.priors) < 2:
+        return []
+    rotations = dict(zip(cand.order, cand.rotations, strict=True))
+    sources = {fid: translations[k] for k, fid in enumerate(cand.order)}
+    positions = priors_in_site_frame(hints.priors, rotations, sources)
+    return [
+        Anchor(positions[fid], hints.priors[fid].source_sigma) if fid in positions else None
+        for fid in cand.order
+    ]
 
 
 def _poses(
@@ -298,17 +322,25 @@ def _choose(
 ) -> tuple[_Placed, list[_Placed], list[Assembly]]:
     """The main assembly and the alternatives worth reporting, made concrete."""
     piece_list = list(pieces.values())
-    known = sum(fid in hints.priors for fid in pieces)
+    sigmas = hints.prior_sigmas()
     assemblies = (
-        rank_assemblies(piece_list, placement, params.placement, known) if placement.closed else []
+        rank_assemblies(piece_list, placement, params.placement, sigmas) if placement.closed else []
     )
     if not assemblies:
         main = _concrete(
-            layouts, pieces, placement.best, placement.translations, params, placement.measured
+            layouts,
+            pieces,
+            placement.best,
+            placement.translations,
+            params,
+            placement.measured,
+            hints,
         )
         return main, [], []
     concrete = [
-        _concrete(layouts, pieces, a.candidate, a.translations, params, placement.measured, a)
+        _concrete(
+            layouts, pieces, a.candidate, a.translations, params, placement.measured, hints, a
+        )
         for a in assemblies[: params.placement.max_alternatives + 1]
     ]
     closing = [c for c in concrete if c.polygon is not None]
@@ -326,6 +358,7 @@ def _slid_rooms(
     pieces: Mapping[str, Piece],
     params: PipelineParams,
     measured: Mapping[tuple[str, str], float],
+    prior_sigmas: Mapping[str, float],
 ) -> list[_Placed]:
     """The runners-up of a lone closed room we doubt: the same assembly with its pieces slid
     ``_SLIDE_SIGMAS`` standard deviations either way along the direction the junctions pin
@@ -339,7 +372,7 @@ def _slid_rooms(
         return []
     cand = main.candidate
     ordered = [pieces[fid] for fid in cand.order]
-    move = widest_slide(ordered, cand.rotations, params.placement, measured)
+    move = widest_slide(ordered, cand.rotations, params.placement, measured, prior_sigmas)
     sure = main.assembly.probability
     doubt = min((1.0 - sure) / 2.0, sure)  # never likelier than the main room
     share = params.placement.same_room_share
@@ -449,7 +482,9 @@ def place_site(
         main.assembly.probability < params.placement.closed_confidence
     )
     if doubted and not alternatives:
-        alternatives = _slid_rooms(main, layouts, pieces, params, placement.measured)
+        alternatives = _slid_rooms(
+            main, layouts, pieces, params, placement.measured, site_hints.prior_sigmas()
+        )
         slid = len(alternatives)
     if site_hints.priors:
         main = _to_hints_frame(main, site_hints, layouts)

@@ -8,7 +8,11 @@ hides an overlap or gap along its wall, a turning one some unseen wall either si
 corner, and both carry keypoint noise. Where the two ends' structure registers sharply
 (``EndMatch.measured_shift``), the overlap along the wall is measured, not guessed: this is
 what fixes a room's length when all its cuts are mid-wall. A measurement the solution
-disagrees with by far is dropped and the problem solved again.
+disagrees with by far is dropped and the problem solved again. Prior poses from the fleet
+(``Anchor``) add a row per hinted piece against its prior position, in a frame of their own
+that may shift freely (one prior alone says where the room is, not how it is shaped); a
+prior the solution misses by more than three of its standard deviations is dropped the same
+way.
 
 * parallel junction: the two walls are collinear (equal offset) and neither overruns the
   other's far end;
@@ -36,6 +40,7 @@ from services.placement.pieces import UNIT
 from services.types import FloatArray
 
 __all__ = [
+    "Anchor",
     "Refinement",
     "measured_shifts",
     "refine_translations",
@@ -47,6 +52,16 @@ _MARGIN = 1e-3  # m, turns the paper's strict inequalities into solvable ones
 _OFFSET_SLACK = 0.10  # m, largest offset mismatch left between walls joined in parallel
 _OFFSET_WEIGHT = 10.0  # weight of that mismatch against the joints' distance
 _SHIFT_OUTLIER = 0.25  # m, a measured overlap the solution misses by more is dropped
+_ANCHOR_OUTLIER = 3.0  # standard deviations: a prior position missed by more is dropped
+
+
+@dataclass(frozen=True)
+class Anchor:
+    """A prior position of one piece's source: (2,) in the site frame (the hints' frame
+    brought back by its fitted yaw and shift) and its standard deviation, m."""
+
+    position: FloatArray
+    sigma: float
 
 
 @dataclass(frozen=True)
@@ -71,6 +86,7 @@ class _Problem:
     """Least squares J t ~ g (weighted rows) and constraints l <= A t <= u.
 
     ``ordering`` marks the no-overrun / no-crossing rows, dropped in the relaxed retry.
+    With anchors, t ends with the priors' frame offset (2 more unknowns).
     """
 
     J: FloatArray
@@ -87,14 +103,19 @@ def _junction_rows(
     rotations: Sequence[int],
     noise: JunctionNoise,
     shifts: Sequence[float | None],
+    anchors: Sequence[Anchor | None] = (),
 ) -> _Problem:
     """The QP's rows: each joint's displacement against its model (per axis, weighted by
     its spread; ``shifts[i]`` the measured overlap at straight junction i, if any), walls
     joined in parallel made collinear (a heavily weighted term, within a small slack:
-    measured walls never close a loop exactly), and the paper's no-overrun and
-    no-crossing inequalities."""
+    measured walls never close a loop exactly), the paper's no-overrun and no-crossing
+    inequalities, and with two anchors or more (``anchors[i]`` piece i's, if any) each
+    anchored source against its prior position plus the free offset of the priors' frame."""
     n = len(pieces)
-    dim = 2 * n
+    anchored = [(k, a) for k, a in enumerate(anchors) if a is not None]
+    if len(anchored) < 2:
+        anchored = []
+    dim = 2 * n + (2 if anchored else 0)
     j_rows: list[FloatArray] = []
     g_vals: list[float] = []
     a_rows: list[FloatArray] = []
@@ -134,6 +155,14 @@ def _junction_rows(
             bounds.append((float(d_i @ (q - p) + _MARGIN), np.inf, True))
             a_rows.append(diff(d_k))  # p starts past this wall's line
             bounds.append((float(d_k @ (q - p) + _MARGIN), np.inf, True))
+    for piece, anchor in anchored:
+        weight = 1.0 / max(anchor.sigma, 1e-6)
+        for c in range(2):
+            # (t + x + offset - prior) / sigma along coordinate c, for the piece's source.
+            row = np.zeros(dim)
+            row[2 * piece + c] = row[2 * n + c] = weight
+            j_rows.append(row)
+            g_vals.append(float(anchor.position[c] - sites[piece][0][c]) * weight)
     gauge = np.zeros((2, dim))
     gauge[0, 0] = gauge[1, 1] = 1.0  # the first piece does not move
     lows = [b[0] for b in bounds] + [0.0, 0.0]
@@ -206,6 +235,7 @@ def refine_translations(
     translations: FloatArray,
     params: PlacementParams = PlacementParams(),
     measured: Mapping[tuple[str, str], float] | None = None,
+    anchors: Sequence[Anchor | None] = (),
 ) -> Refinement:
     """Refine the placement's translations with the constrained QP.
 
@@ -220,6 +250,8 @@ def refine_translations(
     translations : (n, 2) site position of each piece's source from the placement.
     params : the junction displacement model.
     measured : the overlaps the placement measured (``Placement.measured``); None: measure.
+    anchors : prior positions of the pieces' sources, loop order (None: no prior); used
+        where two pieces or more have one.
     """
     n = len(pieces)
     if n < 2:
@@ -230,11 +262,14 @@ def refine_translations(
     ]
     noise = JunctionNoise.from_params(params)
     shifts = measured_shifts(pieces, rotations, measured)
-    refined = _refine(sites, pieces, rotations, translations, noise, shifts)
-    missed = _missed_shifts(sites, refined.translations - translations, shifts)
-    if any(missed):
+    refined = _refine(sites, pieces, rotations, translations, noise, shifts, anchors)
+    moves = refined.translations - translations
+    missed = _missed_shifts(sites, moves, shifts)
+    strays = _stray_anchors(refined.translations, anchors)
+    if any(missed) or any(strays):
         kept = [None if miss else shift for shift, miss in zip(shifts, missed, strict=True)]
-        refined = _refine(sites, pieces, rotations, translations, noise, kept)
+        trusted = [None if stray else a for a, stray in zip(anchors, strays, strict=True)]
+        refined = _refine(sites, pieces, rotations, translations, noise, kept, trusted)
     return refined
 
 
@@ -243,6 +278,7 @@ def translation_spread(
     rotations: Sequence[int],
     params: PlacementParams = PlacementParams(),
     measured: Mapping[tuple[str, str], float] | None = None,
+    prior_sigmas: Mapping[str, float] | None = None,
 ) -> float:
     """How far the junctions leave the pieces free to move: the root mean square, over the
     pieces in loop order (the first fixed), of the standard deviation of each one's position
@@ -253,11 +289,15 @@ def translation_spread(
     room's length is then a guess of the model's (two pieces cut mid-wall on opposite
     walls, or meeting at hidden corners). A result resting on such a guess is no surer of
     its floorplan than this spread allows, however few rival assemblies there are.
+
+    ``prior_sigmas``: the standard deviation (m) of each hinted piece's prior position by
+    id. Two priors or more pin the pieces relative to each other (the hints' frame itself
+    is free), whatever the junctions leave loose.
     """
     n = len(pieces)
     if n < 2:
         return 0.0
-    covariance = _covariance(pieces, rotations, params, measured)
+    covariance = _covariance(pieces, rotations, params, measured, prior_sigmas)
     return float(np.sqrt(np.trace(covariance) / n))
 
 
@@ -266,6 +306,7 @@ def widest_slide(
     rotations: Sequence[int],
     params: PlacementParams = PlacementParams(),
     measured: Mapping[tuple[str, str], float] | None = None,
+    prior_sigmas: Mapping[str, float] | None = None,
 ) -> FloatArray:
     """(n, 2) the move of every piece (the first stays) one standard deviation along the
     direction the junction model leaves the loosest: how the room most likely differs
@@ -273,7 +314,8 @@ def widest_slide(
     n = len(pieces)
     if n < 2:
         return np.zeros((n, 2))
-    values, vectors = np.linalg.eigh(_covariance(pieces, rotations, params, measured))
+    covariance = _covariance(pieces, rotations, params, measured, prior_sigmas)
+    values, vectors = np.linalg.eigh(covariance)
     move = vectors[:, -1] * np.sqrt(max(float(values[-1]), 0.0))
     return np.vstack([np.zeros(2), move.reshape(n - 1, 2)])
 
@@ -283,14 +325,39 @@ def _covariance(
     rotations: Sequence[int],
     params: PlacementParams,
     measured: Mapping[tuple[str, str], float] | None,
+    prior_sigmas: Mapping[str, float] | None = None,
 ) -> FloatArray:
     """(2n - 2, 2n - 2) covariance of the pieces' positions after the first under the
-    junction model alone (the QP's least-squares rows; the first piece is the frame)."""
+    junction model (the QP's least-squares rows; the first piece is the frame) and the
+    hinted pieces' prior positions. The priors' frame is an unknown offset of its own, so a
+    lone prior pins nothing; its yaw is taken as known (a linearisation: the priors'
+    angles are far surer than what they say of a piece's position)."""
     sites = [p.keypoints @ rot90(r).T for p, r in zip(pieces, rotations, strict=True)]
     shifts = measured_shifts(pieces, rotations, measured)
-    problem = _junction_rows(sites, pieces, rotations, JunctionNoise.from_params(params), shifts)
+    sigmas = prior_sigmas or {}
+    # Only the rows' weights matter here, not where the priors are.
+    anchors = [Anchor(np.zeros(2), sigmas[p.id]) if p.id in sigmas else None for p in pieces]
+    noise = JunctionNoise.from_params(params)
+    problem = _junction_rows(sites, pieces, rotations, noise, shifts, anchors)
     free = problem.J[:, 2:]
-    return np.asarray(np.linalg.inv(free.T @ free))
+    dim = 2 * len(pieces) - 2
+    return np.asarray(np.linalg.inv(free.T @ free))[:dim, :dim]
+
+
+def _stray_anchors(translations: FloatArray, anchors: Sequence[Anchor | None]) -> list[bool]:
+    """Per piece: a prior position the refined sources miss by more than
+    ``_ANCHOR_OUTLIER`` standard deviations, once the priors' frame offset (their weighted
+    mean misfit) is taken out: a prior the scans contradict."""
+    anchored = [(k, a) for k, a in enumerate(anchors) if a is not None]
+    out = [False] * len(anchors)
+    if len(anchored) < 2:
+        return out
+    misfit = np.array([a.position - translations[k] for k, a in anchored])
+    weights = np.array([1.0 / max(a.sigma, 1e-6) ** 2 for _, a in anchored])
+    offset = (weights[:, None] * misfit).sum(axis=0) / weights.sum()
+    for (k, anchor), miss in zip(anchored, misfit - offset, strict=True):
+        out[k] = float(np.linalg.norm(miss)) > _ANCHOR_OUTLIER * anchor.sigma
+    return out
 
 
 def _missed_shifts(
@@ -318,12 +385,13 @@ def _refine(
     translations: FloatArray,
     noise: JunctionNoise,
     shifts: Sequence[float | None],
+    anchors: Sequence[Anchor | None] = (),
 ) -> Refinement:
     """One solve of the QP (relaxed, or falling back, as :func:`refine_translations` says)."""
     n = len(pieces)
-    problem = _junction_rows(sites, pieces, rotations, noise, shifts)
+    problem = _junction_rows(sites, pieces, rotations, noise, shifts, anchors)
     everything = np.ones(len(problem.lo), dtype=bool)
-    before = _violation(problem, everything, np.zeros(2 * n))
+    before = _violation(problem, everything, np.zeros(problem.J.shape[1]))
     status, x = _solve(problem, everything)
     label = "solved"
     if x is None:
@@ -335,7 +403,7 @@ def _refine(
         after = _violation(problem, relaxed, x)
     else:
         after = _violation(problem, everything, x)
-    return Refinement(translations + x.reshape(n, 2), label, before, after)
+    return Refinement(translations + x[: 2 * n].reshape(n, 2), label, before, after)
 
 
 def _violation(problem: _Problem, keep: NDArray[np.bool_], x: FloatArray) -> float:

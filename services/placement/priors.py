@@ -82,6 +82,10 @@ class SiteHints:
     priors: Mapping[str, PiecePrior] = field(default_factory=dict)
     pairs: tuple[HintPair, ...] = ()
 
+    def prior_sigmas(self) -> dict[str, float]:
+        """The standard deviation (m) of each hinted piece's prior position, by piece id."""
+        return {fid: prior.source_sigma for fid, prior in self.priors.items()}
+
 
 def chain_placement(layout: LocalLayout, pose: FloatArray) -> tuple[float, FloatArray]:
     """Where a pose (fragment-local -> some frame, (4, 4)) puts a fragment's chain: the
@@ -153,6 +157,18 @@ def fit_frame(
             inliers = misfit < _OUTLIER_MISFIT
             weights = inliers.astype(np.float64) if inliers.any() else np.ones(len(ids))
     return yaw, shift
+
+
+def priors_in_site_frame(
+    priors: Mapping[str, PiecePrior],
+    rotations: Mapping[str, int],
+    sources: Mapping[str, FloatArray],
+) -> dict[str, FloatArray]:
+    """Each prior's source position (2,) brought into the site frame by the frame
+    :func:`fit_frame` fits to the assembly (``rotations``, ``sources`` as there)."""
+    yaw, shift = fit_frame(priors, rotations, sources)
+    back = _rotation(-yaw)
+    return {fid: back @ (prior.source - shift) for fid, prior in priors.items() if fid in rotations}
 
 
 @dataclass(frozen=True)

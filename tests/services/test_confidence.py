@@ -207,3 +207,15 @@ def test_a_loose_room_is_never_surer_than_the_loose_rooms_cap():
     assert rank_assemblies(*_halves(2.0), GEOMETRY)[0].probability > cap
     free = GEOMETRY.model_copy(update={"loose_room_slack": 100.0})
     assert rank_assemblies(*_halves(0.5, free), free)[0].probability > cap
+
+
+def test_priors_that_pin_a_loose_rooms_pieces_lift_its_cap():
+    # The fleet's prior poses fix what the junctions leave loose: 5 cm priors on both small
+    # halves make their room's size no guess; one prior alone says only where the room is.
+    cap = GEOMETRY.loose_room_confidence
+    pieces, placement = _halves(0.5)
+    ids = [p.id for p in pieces]
+    both = rank_assemblies(pieces, placement, GEOMETRY, dict.fromkeys(ids, 0.05))
+    assert both[0].probability > cap
+    one = rank_assemblies(pieces, placement, GEOMETRY, {ids[1]: 0.05})
+    assert one[0].probability == pytest.approx(cap)

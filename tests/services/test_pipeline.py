@@ -494,6 +494,24 @@ def test_a_lone_room_whose_size_is_a_guess_is_ambiguous_with_itself_resized():
     assert min(widths) < -0.2 and max(widths) > 0.2  # one narrower, one wider
 
 
+@pytest.mark.parametrize(("sigma_xy", "status"), [(0.03, "closed"), (1.5, "ambiguous")])
+def test_prior_poses_that_pin_the_halves_make_the_room_no_guess(sigma_xy, status):
+    # The same 3 x 2 m halves, each with a prior pose where its cut really is: priors of
+    # 3 cm fix the room's width, which the junctions left loose; priors of 1.5 m do not.
+    sources = {"p0": (1.5, 0.0), "p1": (1.5, 2.0)}  # the cuts mid-bottom and mid-top
+    priors = {}
+    for fid, (x, y) in sources.items():
+        pose = np.eye(4)
+        pose[:2, 3] = (x, y)
+        priors[fid] = FragmentPrior(pose=pose.tolist(), sigma_xy=sigma_xy, sigma_yaw_deg=1.0)
+    result = place_site(_halves(3.0, 2.0), hints=HintsModel(fragments=priors))
+    assert result.status == status
+    width = np.ptp(np.array(result.floorplan.rooms[0].polygon)[:, 0])
+    if status == "closed":
+        assert width == pytest.approx(3.0, abs=0.1)
+        assert "slid_alternatives" not in result.diagnostics
+
+
 def test_a_doubted_lone_room_that_no_slide_changes_stays_open():
     # The slid runners-up are offered only where sliding makes another room. In a 40 x 30 m
     # room the same slide is a fraction of what tells two rooms apart: doubted (here by a

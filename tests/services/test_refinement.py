@@ -8,7 +8,12 @@ import pytest
 from schemas.params import PlacementParams
 from services.placement import place_pieces, rot90, translations_of
 from services.placement.search import evaluate_placement
-from services.refinement import measured_shifts, refine_translations, translation_spread
+from services.refinement import (
+    Anchor,
+    measured_shifts,
+    refine_translations,
+    translation_spread,
+)
 from tests.conftest import chains_from_polygon, overlapping_halves
 
 pytestmark = pytest.mark.timeout(60)
@@ -115,6 +120,53 @@ def test_pieces_free_to_slide_have_a_wide_spread_that_a_measured_overlap_narrows
     slide = np.hypot(params.junction_sigma, params.keypoint_sigma) / np.sqrt(2.0)
     assert spread_free == pytest.approx(slide / np.sqrt(2.0), rel=0.2)
     assert spread_pinned < 0.5 * spread_free
+
+
+def test_priors_pin_pieces_the_junctions_leave_free_and_a_lone_prior_pins_nothing():
+    # Two priors of 5 cm fix the halves relative to each other (the hints' frame itself is
+    # free); a single prior only says where the room is, not how long it is.
+    free = overlapping_halves(False)
+    spread_free = translation_spread(free, [0, 0])
+    both = {"p0": 0.05, "p1": 0.05}
+    pinned = translation_spread(free, [0, 0], prior_sigmas=both)
+    # At most the spread of the second half's position relative to the first by the two
+    # priors alone (per axis hypot(5 cm, 5 cm), over two pieces, one fixed).
+    assert pinned < np.hypot(0.05, 0.05)
+    assert pinned < 0.5 * spread_free
+    lone = translation_spread(free, [0, 0], prior_sigmas={"p1": 0.05})
+    assert lone == pytest.approx(spread_free)
+    loose = translation_spread(free, [0, 0], prior_sigmas={"p0": 50.0, "p1": 50.0})
+    assert loose == pytest.approx(spread_free, rel=0.01)
+
+
+def test_prior_positions_fix_what_the_junctions_leave_to_the_model():
+    # The halves overlap 0.4 m at the bottom cut, which nothing measures: without priors the
+    # second half sits where the overlap model guesses. Priors of 2 cm at the true sources
+    # (in a frame shifted by (10, -5): only their relative positions count) put it there.
+    pieces = overlapping_halves(False)
+    start = np.array([[3.0, 0.0], [0.3, 4.0]])
+    guessed = refine_translations(pieces, [0, 0], start)
+    truth = np.array([[3.0, 0.0], [0.0, 4.0]])  # the sources: mid-bottom, top-left corner
+    anchors = [Anchor(t + np.array([10.0, -5.0]), 0.02) for t in truth]
+    anchored = refine_translations(pieces, [0, 0], start, anchors=anchors)
+    assert anchored.status == "solved"
+    relative = anchored.translations[1] - anchored.translations[0]
+    assert relative == pytest.approx(truth[1] - truth[0], abs=0.03)
+    assert abs((guessed.translations[1] - guessed.translations[0] - relative)[0]) > 0.1
+    # One prior alone pins nothing: the same as none.
+    lone = refine_translations(pieces, [0, 0], start, anchors=[None, anchors[1]])
+    assert np.allclose(lone.translations, guessed.translations, atol=1e-6)
+
+
+def test_a_prior_the_junctions_contradict_is_dropped():
+    # A prior 5 m off where the walls must join is not obeyed: the refinement is the one
+    # without priors.
+    pieces = overlapping_halves(False)
+    start = np.array([[3.0, 0.0], [0.3, 4.0]])
+    guessed = refine_translations(pieces, [0, 0], start)
+    anchors = [Anchor(np.array([3.0, 0.0]), 0.05), Anchor(np.array([0.0, 9.0]), 0.05)]
+    stray = refine_translations(pieces, [0, 0], start, anchors=anchors)
+    assert np.allclose(stray.translations, guessed.translations, atol=1e-6)
 
 
 def test_a_lone_piece_has_no_spread():
