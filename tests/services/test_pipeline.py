@@ -512,6 +512,29 @@ def test_prior_poses_that_pin_the_halves_make_the_room_no_guess(sigma_xy, status
         assert "slid_alternatives" not in result.diagnostics
 
 
+def test_prior_poses_set_the_room_size_the_junctions_only_guess():
+    # The same halves, but the fleet's priors (3 cm, in a frame turned by 30 degrees and
+    # shifted) put the second half 0.4 m further left: the cuts hid 0.4 m of wall each, and
+    # the room is 3.4 m wide, not the 3 m the junction model guesses. The floorplan, in the
+    # hints' frame, follows the priors.
+    turn = np.radians(30.0)
+    to_hints = np.eye(4)
+    to_hints[:2, :2] = [[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]]
+    to_hints[:2, 3] = (5.0, -2.0)
+    priors = {}
+    for fid, source in {"p0": (1.5, 0.0), "p1": (1.1, 2.0)}.items():
+        pose = np.eye(4)
+        pose[:2, 3] = source
+        priors[fid] = FragmentPrior(
+            pose=(to_hints @ pose).tolist(), sigma_xy=0.03, sigma_yaw_deg=1.0
+        )
+    result = place_site(_halves(3.0, 2.0), hints=HintsModel(fragments=priors))
+    polygon = np.array(result.floorplan.rooms[0].polygon)
+    sides = np.linalg.norm(np.diff(np.vstack([polygon, polygon[:1]]), axis=0), axis=1)
+    assert sorted(sides[sides > 0.05])[-1] == pytest.approx(3.4, abs=0.05)
+    assert not result.diagnostics["hints_contradicted"]
+
+
 def test_a_doubted_lone_room_that_no_slide_changes_stays_open():
     # The slid runners-up are offered only where sliding makes another room. In a 40 x 30 m
     # room the same slide is a fraction of what tells two rooms apart: doubted (here by a
