@@ -55,7 +55,13 @@ from services.placement.priors import (
     priors_in_site_frame,
     wrap_angle,
 )
-from services.refinement import Anchor, Refinement, refine_translations, widest_slide
+from services.refinement import (
+    Anchor,
+    Refinement,
+    refine_translations,
+    stray_anchors,
+    widest_slide,
+)
 from services.registration import premerge
 from services.rgbd import RgbdFrame
 from services.types import FloatArray, LocalLayout, ParsedFragment, ProgressFn
@@ -194,6 +200,21 @@ def _anchors(
     ]
 
 
+def _trusted_sigmas(hints: SiteHints, placement: Placement) -> dict[str, float]:
+    """The position sigma of each prior the search's best assembly does not contradict, by
+    piece id. The refinement drops a stray prior (``stray_anchors``), so it pins nothing:
+    counted in the room's slack, a room would close on priors its floorplan did not use."""
+    anchors = _anchors(hints, placement.best, placement.translations)
+    if not anchors:
+        return hints.prior_sigmas()  # a lone prior (or none): nothing to check it against
+    strays = stray_anchors(placement.translations, anchors)
+    return {
+        fid: anchor.sigma
+        for fid, anchor, stray in zip(placement.best.order, anchors, strays, strict=True)
+        if anchor is not None and not stray
+    }
+
+
 def _poses(
     layouts: Mapping[str, LocalLayout], cand: PlacementCandidate, translations: FloatArray
 ) -> dict[str, FloatArray]:
@@ -319,10 +340,11 @@ def _choose(
     placement: Placement,
     params: PipelineParams,
     hints: SiteHints,
+    sigmas: Mapping[str, float],
 ) -> tuple[_Placed, list[_Placed], list[Assembly]]:
-    """The main assembly and the alternatives worth reporting, made concrete."""
+    """The main assembly and the alternatives worth reporting, made concrete (``sigmas``:
+    the trusted priors' position sigmas, :func:`_trusted_sigmas`)."""
     piece_list = list(pieces.values())
-    sigmas = hints.prior_sigmas()
     assemblies = (
         rank_assemblies(piece_list, placement, params.placement, sigmas) if placement.closed else []
     )
@@ -476,15 +498,14 @@ def place_site(
             diagnostics={"reason": "no fragment shows a wall"},
         )
     report("refinement", 0.7)
-    main, alternatives, assemblies = _choose(layouts, pieces, placement, params, site_hints)
+    sigmas = _trusted_sigmas(site_hints, placement)
+    main, alternatives, assemblies = _choose(layouts, pieces, placement, params, site_hints, sigmas)
     slid = 0
     doubted = main.assembly is not None and (
         main.assembly.probability < params.placement.closed_confidence
     )
     if doubted and not alternatives:
-        alternatives = _slid_rooms(
-            main, layouts, pieces, params, placement.measured, site_hints.prior_sigmas()
-        )
+        alternatives = _slid_rooms(main, layouts, pieces, params, placement.measured, sigmas)
         slid = len(alternatives)
     if site_hints.priors:
         main = _to_hints_frame(main, site_hints, layouts)

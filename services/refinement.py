@@ -44,6 +44,7 @@ __all__ = [
     "Refinement",
     "measured_shifts",
     "refine_translations",
+    "stray_anchors",
     "translation_spread",
     "widest_slide",
 ]
@@ -265,7 +266,7 @@ def refine_translations(
     refined = _refine(sites, pieces, rotations, translations, noise, shifts, anchors)
     moves = refined.translations - translations
     missed = _missed_shifts(sites, moves, shifts)
-    strays = _stray_anchors(refined.translations, anchors)
+    strays = stray_anchors(refined.translations, anchors)
     if any(missed) or any(strays):
         kept = [None if miss else shift for shift, miss in zip(shifts, missed, strict=True)]
         trusted = [None if stray else a for a, stray in zip(anchors, strays, strict=True)]
@@ -344,7 +345,7 @@ def _covariance(
     return np.asarray(np.linalg.inv(free.T @ free))[:dim, :dim]
 
 
-def _stray_anchors(translations: FloatArray, anchors: Sequence[Anchor | None]) -> list[bool]:
+def stray_anchors(translations: FloatArray, anchors: Sequence[Anchor | None]) -> list[bool]:
     """Per piece: a prior position the refined sources miss by more than
     ``_ANCHOR_OUTLIER`` standard deviations, once the priors' frame offset (their weighted
     mean misfit) is taken out: a prior the scans contradict."""

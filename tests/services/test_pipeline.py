@@ -535,6 +535,22 @@ def test_prior_poses_set_the_room_size_the_junctions_only_guess():
     assert not result.diagnostics["hints_contradicted"]
 
 
+def test_a_prior_the_scans_contradict_pins_nothing():
+    # The same halves with 3 cm priors, one of them 5 m from where the walls let its half
+    # be: the refinement drops both (neither can be told right), so the room's width is the
+    # junction model's guess again, and the result must say so rather than close on priors
+    # it did not use.
+    priors = {}
+    for fid, (x, y) in {"p0": (1.5, 0.0), "p1": (1.5, 7.0)}.items():
+        pose = np.eye(4)
+        pose[:2, 3] = (x, y)
+        priors[fid] = FragmentPrior(pose=pose.tolist(), sigma_xy=0.03, sigma_yaw_deg=1.0)
+    result = place_site(_halves(3.0, 2.0), hints=HintsModel(fragments=priors))
+    assert result.status == "ambiguous"
+    assert result.confidence <= PipelineParams().placement.loose_room_confidence
+    assert result.diagnostics["hints_contradicted"]
+
+
 def test_a_doubted_lone_room_that_no_slide_changes_stays_open():
     # The slid runners-up are offered only where sliding makes another room. In a 40 x 30 m
     # room the same slide is a fraction of what tells two rooms apart: doubted (here by a
