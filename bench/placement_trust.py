@@ -421,9 +421,14 @@ def noisy_priors(scene: CachedScene, sigma_xy: float, sigma_yaw_deg: float) -> H
     return HintsModel(fragments=fragments)
 
 
-def hints_table(scenes: Sequence[CachedScene], sigma_xy: float, sigma_yaw: float) -> Table:
+def hints_table(
+    scenes: Sequence[CachedScene], sigma_xy: float, sigma_yaw: float, rooms: str = "random rooms"
+) -> Table:
     """Priors alone against priors with the layouts, per bucket."""
-    title = f"Hints: prior poses of {sigma_xy} m and {sigma_yaw} deg, alone and with the layouts"
+    title = (
+        f"Hints ({rooms}): prior poses of {sigma_xy} m and {sigma_yaw} deg, alone and with "
+        "the layouts"
+    )
     table = Table(title=title, title_justify="left", box=box.SIMPLE)
     headers = (
         "fragments",
@@ -482,6 +487,17 @@ def _arguments(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--workers", type=int, default=2, help="processes building layouts")
     parser.add_argument("--ablation-per-bucket", type=int, default=10, help="0 to skip")
     parser.add_argument("--hints-per-bucket", type=int, default=10, help="0 to skip")
+    parser.add_argument(
+        "--hints-real", type=int, default=0, help="real rooms in a hints table of their own"
+    )
+    parser.add_argument(
+        "--hints-sigma",
+        type=float,
+        nargs=2,
+        default=(1.5, 20.0),
+        metavar=("M", "DEG"),
+        help="the priors' standard deviations",
+    )
     parser.add_argument("--cues-scenes", type=int, default=60, help="0 to skip the AUC table")
     parser.add_argument("--dump", type=Path, help="write every scene's outcome to this JSON")
     return parser.parse_args(argv)
@@ -524,8 +540,13 @@ def main(argv: list[str] | None = None) -> int:
         console.print(overlap_table(scenes[: args.cues_scenes]))
     if args.ablation_per_bucket:
         console.print(ablation_table(_subset(scenes, args.ablation_per_bucket)))
+    sigma_xy, sigma_yaw = args.hints_sigma
     if args.hints_per_bucket:
-        console.print(hints_table(_subset(scenes, args.hints_per_bucket), 1.5, 20.0))
+        hinted = _subset(scenes, args.hints_per_bucket)
+        console.print(hints_table(hinted, sigma_xy, sigma_yaw))
+    if args.hints_real:
+        real_rooms = [s for s in scenes if s.name.endswith("_real")][: args.hints_real]
+        console.print(hints_table(real_rooms, sigma_xy, sigma_yaw, "real room shapes"))
     console.print(f"total {(time.perf_counter() - started) / 60:.1f} min")
     return 0
 
