@@ -200,17 +200,32 @@ def _anchors(
     ]
 
 
-def _trusted_sigmas(hints: SiteHints, placement: Placement) -> dict[str, float]:
-    """The position sigma of each prior the search's best assembly does not contradict, by
+def _trusted_sigmas(
+    hints: SiteHints,
+    placement: Placement,
+    pieces: Mapping[str, Piece],
+    params: PipelineParams,
+) -> dict[str, float]:
+    """The position sigma of each prior the refined best assembly does not contradict, by
     piece id. The refinement drops a stray prior (``stray_anchors``), so it pins nothing:
     counted in the room's slack, a room would close on priors its floorplan did not use."""
-    anchors = _anchors(hints, placement.best, placement.translations)
-    if not anchors:
-        return hints.prior_sigmas()  # a lone prior (or none): nothing to check it against
-    strays = stray_anchors(placement.translations, anchors)
+    best = placement.best
+    anchors = _anchors(hints, best, placement.translations)
+    if not anchors or best.missing:
+        return hints.prior_sigmas()  # fewer than two priors, or no loop to refine
+    ordered = [pieces[fid] for fid in best.order]
+    refined = refine_translations(
+        ordered,
+        best.rotations,
+        placement.translations,
+        params.placement,
+        placement.measured,
+        anchors,
+    )
+    strays = stray_anchors(refined.translations, anchors)
     return {
         fid: anchor.sigma
-        for fid, anchor, stray in zip(placement.best.order, anchors, strays, strict=True)
+        for fid, anchor, stray in zip(best.order, anchors, strays, strict=True)
         if anchor is not None and not stray
     }
 
@@ -498,7 +513,7 @@ def place_site(
             diagnostics={"reason": "no fragment shows a wall"},
         )
     report("refinement", 0.7)
-    sigmas = _trusted_sigmas(site_hints, placement)
+    sigmas = _trusted_sigmas(site_hints, placement, pieces, params)
     main, alternatives, assemblies = _choose(layouts, pieces, placement, params, site_hints, sigmas)
     slid = 0
     doubted = main.assembly is not None and (

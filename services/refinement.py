@@ -281,9 +281,9 @@ def translation_spread(
     measured: Mapping[tuple[str, str], float] | None = None,
     prior_sigmas: Mapping[str, float] | None = None,
 ) -> float:
-    """How far the junctions leave the pieces free to move: the root mean square, over the
-    pieces in loop order (the first fixed), of the standard deviation of each one's position
-    under the QP's junction model (m; inequalities left out).
+    """How far the junctions (and priors) leave the pieces free to move: the root mean
+    square, over the pieces in loop order (the first fixed), of the standard deviation of
+    each one's position under the QP's rows (m; inequalities left out).
 
     Where every junction hides an unseen stretch and none is measured, the loop's closure
     may fix only the sum of those stretches: the pieces can slide along a wall, and the
@@ -346,18 +346,25 @@ def _covariance(
 
 
 def stray_anchors(translations: FloatArray, anchors: Sequence[Anchor | None]) -> list[bool]:
-    """Per piece: a prior position the refined sources miss by more than
-    ``_ANCHOR_OUTLIER`` standard deviations, once the priors' frame offset (their weighted
-    mean misfit) is taken out: a prior the scans contradict."""
-    anchored = [(k, a) for k, a in enumerate(anchors) if a is not None]
+    """Per piece: a prior position the sources miss by more than ``_ANCHOR_OUTLIER``
+    standard deviations, once the priors' frame offset is taken out: a prior the scans
+    contradict. The offset is the weighted mean misfit of the priors still trusted, the
+    worst one dropped at a time, so one prior far off does not drag the others out."""
     out = [False] * len(anchors)
-    if len(anchored) < 2:
-        return out
-    misfit = np.array([a.position - translations[k] for k, a in anchored])
-    weights = np.array([1.0 / max(a.sigma, 1e-6) ** 2 for _, a in anchored])
-    offset = (weights[:, None] * misfit).sum(axis=0) / weights.sum()
-    for (k, anchor), miss in zip(anchored, misfit - offset, strict=True):
-        out[k] = float(np.linalg.norm(miss)) > _ANCHOR_OUTLIER * anchor.sigma
+    trusted = [(k, a) for k, a in enumerate(anchors) if a is not None]
+    while len(trusted) >= 2:
+        misfit = np.array([a.position - translations[k] for k, a in trusted])
+        weights = np.array([1.0 / max(a.sigma, 1e-6) ** 2 for _, a in trusted])
+        offset = (weights[:, None] * misfit).sum(axis=0) / weights.sum()
+        scaled = np.linalg.norm(misfit - offset, axis=1) / np.array(
+            [max(a.sigma, 1e-6) for _, a in trusted]
+        )
+        worst = int(np.argmax(scaled))
+        if scaled[worst] <= _ANCHOR_OUTLIER:
+            return out
+        out[trusted[worst][0]] = True
+        del trusted[worst]
+    # A lone prior left is checked against nothing: it pins nothing either.
     return out
 
 

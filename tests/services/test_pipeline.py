@@ -533,6 +533,8 @@ def test_prior_poses_set_the_room_size_the_junctions_only_guess():
     sides = np.linalg.norm(np.diff(np.vstack([polygon, polygon[:1]]), axis=0), axis=1)
     assert sorted(sides[sides > 0.05])[-1] == pytest.approx(3.4, abs=0.05)
     assert not result.diagnostics["hints_contradicted"]
+    # The priors the refinement used pin the room: no longer a guess.
+    assert result.status == "closed" and "slid_alternatives" not in result.diagnostics
 
 
 def test_a_prior_the_scans_contradict_pins_nothing():

@@ -12,6 +12,7 @@ from services.refinement import (
     Anchor,
     measured_shifts,
     refine_translations,
+    stray_anchors,
     translation_spread,
 )
 from tests.conftest import chains_from_polygon, overlapping_halves
@@ -167,6 +168,14 @@ def test_a_prior_the_junctions_contradict_is_dropped():
     anchors = [Anchor(np.array([3.0, 0.0]), 0.05), Anchor(np.array([0.0, 9.0]), 0.05)]
     stray = refine_translations(pieces, [0, 0], start, anchors=anchors)
     assert np.allclose(stray.translations, guessed.translations, atol=1e-6)
+
+
+def test_one_prior_far_off_does_not_make_the_others_strays():
+    # Three priors, one 1 m off at 5 cm: only that one is a stray.
+    sources = np.array([[0.0, 0.0], [3.0, 0.0], [3.0, 3.0]])
+    anchors = [Anchor(sources[0], 0.05), Anchor(sources[1], 0.05), Anchor(sources[2] + 1.0, 0.05)]
+    assert stray_anchors(sources, anchors) == [False, False, True]
+    assert stray_anchors(sources, [*anchors[:2], None]) == [False, False, False]
 
 
 def test_a_lone_piece_has_no_spread():
