@@ -59,7 +59,6 @@ from services.refinement import (
     Anchor,
     Refinement,
     refine_translations,
-    stray_anchors,
     widest_slide,
 )
 from services.registration import premerge
@@ -206,9 +205,9 @@ def _trusted_sigmas(
     pieces: Mapping[str, Piece],
     params: PipelineParams,
 ) -> dict[str, float]:
-    """The position sigma of each prior the refined best assembly does not contradict, by
-    piece id. The refinement drops a stray prior (``stray_anchors``), so it pins nothing:
-    counted in the room's slack, a room would close on priors its floorplan did not use."""
+    """The position sigma of each prior the best assembly's refinement kept, by piece id.
+    The refinement drops a stray prior (``Refinement.strays``), so it pins nothing: counted
+    in the room's slack, a room would close on priors its floorplan did not use."""
     best = placement.best
     anchors = _anchors(hints, best, placement.translations)
     if not anchors or best.missing:
@@ -222,10 +221,9 @@ def _trusted_sigmas(
         placement.measured,
         anchors,
     )
-    strays = stray_anchors(refined.translations, anchors)
     return {
         fid: anchor.sigma
-        for fid, anchor, stray in zip(best.order, anchors, strays, strict=True)
+        for fid, anchor, stray in zip(best.order, anchors, refined.strays, strict=True)
         if anchor is not None and not stray
     }
 

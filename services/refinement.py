@@ -25,7 +25,7 @@ infeasible or unsolved problem returns a meaningless x.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import osqp
@@ -74,12 +74,15 @@ class Refinement:
     violation_before, violation_after: the largest junction-constraint violation (m) of the
     unrefined and the refined translations. Gaps along a continuing wall are not violations:
     the two collinear walls simply join; the loop is closed when no constraint is violated.
+    strays: per piece (loop order; empty without anchors), whether its prior was dropped as
+    one the scans contradict (``stray_anchors``).
     """
 
     translations: FloatArray
     status: str
     violation_before: float
     violation_after: float
+    strays: tuple[bool, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -271,7 +274,7 @@ def refine_translations(
         kept = [None if miss else shift for shift, miss in zip(shifts, missed, strict=True)]
         trusted = [None if stray else a for a, stray in zip(anchors, strays, strict=True)]
         refined = _refine(sites, pieces, rotations, translations, noise, kept, trusted)
-    return refined
+    return replace(refined, strays=tuple(strays))
 
 
 def translation_spread(
