@@ -187,7 +187,8 @@ def test_running_job_is_kept_from_others_by_the_keeper(client: Any) -> None:
     owner = Consumer("owner", client, client, settings, leases, stop, handlers={"layout": slow})
     keeper = Keeper("w1", client, settings, leases, stop)
     _enqueue(client)
-    threading.Thread(target=keeper.run, daemon=True).start()
+    beating = threading.Thread(target=keeper.run, daemon=True)
+    beating.start()
     runner = threading.Thread(target=owner.step)
     runner.start()
     # The owner must hold the job before the other consumer looks, or the other one may
@@ -206,6 +207,8 @@ def test_running_job_is_kept_from_others_by_the_keeper(client: Any) -> None:
         other.step()
     runner.join()
     stop.set()
+    # The keeper may be mid-beat: the fixture closes the client only after it is done.
+    beating.join(timeout=5.0)
     assert other_handler.runs == [] and slow.runs == [1]
     assert _empty(client)
     assert client.zscore(KEYS.workers, "w1") is not None
