@@ -17,8 +17,8 @@ Evidence = Literal["cloud", "thin_cloud", "frame"]  # what a local layout rests 
 class LocalLayoutWire(BaseModel):
     """A :class:`services.types.LocalLayout` as versioned JSON.
 
-    Boundary points and the footprint are base64 little-endian float64 arrays ((M, 3) and
-    (F, 2)) in the aligned frame.
+    Boundary points, the footprint and the unchained walls are base64 little-endian float64
+    arrays ((M, 3), (F, 2) and (W, 2)) in the aligned frame.
     """
 
     model_config = ConfigDict(frozen=True)
@@ -35,4 +35,7 @@ class LocalLayoutWire(BaseModel):
         "cloud",
         description="what the chain rests on: a cloud, a cloud thinner than the confidence's "
         "calibration saw, or RGB-D frames (the last two calibrated apart)",
+    )
+    unchained_walls: str = Field(
+        "", description="centres of wall cells no wall of the chain runs through (base64)"
     )

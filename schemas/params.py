@@ -225,6 +225,21 @@ class PlacementParams(_Frozen):
         description="the most a loose room's confidence can be: of the tune split's rooms "
         "calibrated at 0.95 or more, 6 of the 8 loose ones were right (81 of 82 others)",
     )
+    unexplained_wall_limit: float = Field(
+        0.24,
+        gt=0,
+        description="meters of wall the scans show inside the main room, off its floorplan "
+        "(services.wall_evidence), from which the floorplan misses a wall: a fin or notch "
+        "a chain cut across (the shortest candidate wall: 3 cells of 0.08 m)",
+    )
+    unexplained_wall_confidence: float = Field(
+        0.25,
+        ge=0,
+        le=1,
+        description="the most such a room's confidence can be: of the tune split's rooms "
+        "with that much wall unexplained, 2 of 9 were right by the paper's test (5 of 12 on "
+        "the test split: the missed wall is often a short fin the test forgives)",
+    )
     closed_confidence: float = Field(
         0.95,
         gt=0,

@@ -11,7 +11,13 @@ from numpy.typing import NDArray
 
 from services.types import FloatArray
 
-__all__ = ["distance_to_polygon", "is_simple_rectilinear", "points_in_polygon", "signed_area"]
+__all__ = [
+    "distance_to_chain",
+    "distance_to_polygon",
+    "is_simple_rectilinear",
+    "points_in_polygon",
+    "signed_area",
+]
 
 BoolArray = NDArray[np.bool_]
 
@@ -59,15 +65,29 @@ def distance_to_polygon(xy: FloatArray, polygon: FloatArray) -> FloatArray:
     >>> distance_to_polygon(np.array([[1.0, 1.0], [3.0, 1.0]]), square).tolist()
     [1.0, 1.0]
     """
-    following = np.roll(polygon, -1, axis=0)
-    if np.all((polygon[:, 0] == following[:, 0]) | (polygon[:, 1] == following[:, 1])):
-        # Axis-parallel edges (floor plans): the nearest point is the clamped one.
-        lo, hi = np.minimum(polygon, following), np.maximum(polygon, following)
+    return _distance_to_segments(xy, polygon, np.roll(polygon, -1, axis=0))
+
+
+def distance_to_chain(xy: FloatArray, chain: FloatArray) -> FloatArray:
+    """Distance from (M, 2) points to the nearest wall of an open (K, 2) chain (K >= 2).
+
+    >>> chain = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]])
+    >>> distance_to_chain(np.array([[0.0, 1.0], [3.0, 1.0]]), chain).tolist()
+    [1.0, 1.0]
+    """
+    return _distance_to_segments(xy, chain[:-1], chain[1:])
+
+
+def _distance_to_segments(xy: FloatArray, starts: FloatArray, ends: FloatArray) -> FloatArray:
+    """(M,) distance from each point to the nearest of the segments starts[i] -> ends[i]."""
+    if np.all((starts[:, 0] == ends[:, 0]) | (starts[:, 1] == ends[:, 1])):
+        # Axis-parallel segments (floor plans): the nearest point is the clamped one.
+        lo, hi = np.minimum(starts, ends), np.maximum(starts, ends)
         offset = xy[:, None, :] - np.clip(xy[:, None, :], lo[None], hi[None])
         squared: FloatArray = (offset**2).sum(-1).min(axis=1)
         return np.sqrt(squared)
-    a = polygon[None, :, :]
-    ab = following[None, :, :] - a
+    a = starts[None, :, :]
+    ab = ends[None, :, :] - a
     ap = xy[:, None, :] - a
     t = np.clip((ap * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
     nearest = ap - t[..., None] * ab

@@ -2,19 +2,38 @@
 
 from __future__ import annotations
 
-import numpy as np
+from collections.abc import Sequence
 
-from schemas.params import PipelineParams
+import numpy as np
+from scipy.spatial import cKDTree
+
+from schemas.params import LayoutParams, PipelineParams
+from services.geometry import distance_to_chain
 from services.manhattan import estimate_manhattan_frame, thin_with_normals
 from services.types import Evidence, FloatArray, LocalLayout, ProgressFn
 from services.wall_graph import find_wall_chain
-from services.wall_lines import find_wall_lines
+from services.wall_lines import WallLine, find_wall_lines
 
-__all__ = ["FOOTPRINT_CELL", "boundary_points", "estimate_local_layout", "footprint_cells"]
+__all__ = [
+    "FOOTPRINT_CELL",
+    "boundary_points",
+    "estimate_local_layout",
+    "footprint_cells",
+    "unchained_walls",
+    "wall_points_under_ceiling",
+]
 
 _MAX_BOUNDARY_POINTS = 4000
 FOOTPRINT_CELL = 0.25  # m
 _FOOTPRINT_MIN_POINTS = 4
+# m: wall cells this close to a chain wall are that wall, placed a little off by the chain
+# (a wall line 0.23 m from its wall is a small error, not a missed wall)
+_ON_CHAIN = 0.3
+# m: an unchained wall must show wall points this close under the ceiling: tall furniture
+# (a 2.2 m wardrobe's front passes the wall tests in a 2.5 m room) stops further down
+_UNDER_CEILING = 0.12
+_UNDER_CEILING_POINTS = 3  # of them within a cell's reach: a stray point is no wall
+_VERTICAL = 0.5  # |normal z| under this: a point of a vertical surface
 
 
 def boundary_points(
@@ -60,6 +79,41 @@ def footprint_cells(aligned: FloatArray, cell: float = FOOTPRINT_CELL) -> FloatA
     cells, counts = np.unique(ij, axis=0, return_counts=True)
     centres: FloatArray = ((cells[counts >= _FOOTPRINT_MIN_POINTS] + 0.5) * cell).astype(np.float64)
     return centres
+
+
+def unchained_walls(
+    lines: Sequence[WallLine],
+    keypoints: FloatArray,
+    under_ceiling: FloatArray,
+    params: LayoutParams,
+) -> FloatArray:
+    """(W, 2) centres of the wall cells with high evidence, in runs as long as the shortest
+    candidate wall, that lie off every wall of the chain and rise to the ceiling (points of
+    ``under_ceiling`` within a cell: (P, 2) positions of wall points just under it): walls
+    the scan shows and the chain does not follow, aligned frame."""
+    cells = [line.high_cells(params.min_wall_cells) for line in lines]
+    centres = np.concatenate([np.zeros((0, 2)), *cells])
+    if len(keypoints) < 2 or len(centres) == 0 or len(under_ceiling) == 0:
+        return np.zeros((0, 2))
+    centres = centres[distance_to_chain(centres, keypoints) > _ON_CHAIN]
+    if len(centres) == 0:
+        return centres
+    near = cKDTree(under_ceiling).query_ball_point(centres, params.cell_size, return_length=True)
+    kept: FloatArray = centres[near >= _UNDER_CEILING_POINTS]
+    return kept
+
+
+def wall_points_under_ceiling(
+    aligned: FloatArray, normals: FloatArray, ceiling_z: float | None
+) -> FloatArray:
+    """(P, 2) positions of the points of vertical surfaces just under the ceiling (or the
+    top of the scan when it saw no ceiling), aligned frame."""
+    if len(aligned) == 0:
+        return np.zeros((0, 2))
+    top = ceiling_z if ceiling_z is not None else float(np.percentile(aligned[:, 2], 99.5))
+    near = (aligned[:, 2] > top - _UNDER_CEILING) & (np.abs(normals[:, 2]) < _VERTICAL)
+    positions: FloatArray = aligned[near, :2]
+    return positions
 
 
 def _unit(v: FloatArray) -> FloatArray:
@@ -117,6 +171,9 @@ def estimate_local_layout(
         target_boundary=boundary_points(aligned, kp[-1], _unit(kp[-2] - kp[-1]), band, depth),
         footprint=footprint_cells(aligned),
         evidence=evidence,
+        unchained_walls=unchained_walls(
+            lines, kp, wall_points_under_ceiling(aligned, normals, frame.ceiling_z), params.layout
+        ),
     )
     report("done", 1.0)
     return layout

@@ -64,6 +64,7 @@ from services.refinement import (
 from services.registration import premerge
 from services.rgbd import RgbdFrame
 from services.types import FloatArray, LocalLayout, ParsedFragment, ProgressFn
+from services.wall_evidence import unexplained_walls
 
 __all__ = [
     "Alignment",
@@ -384,6 +385,23 @@ def _choose(
     return closing[0], closing[1:], assemblies
 
 
+def _check_walls(
+    main: _Placed, layouts: Mapping[str, LocalLayout], params: PipelineParams
+) -> tuple[_Placed, dict[str, float]]:
+    """The main room with its confidence capped when the scans show walls inside it that
+    its floorplan misses (:func:`services.wall_evidence.unexplained_walls`), and those
+    meters per fragment (empty when under the limit)."""
+    if main.polygon is None or main.assembly is None:
+        return main, {}
+    meters = unexplained_walls(main.polygon, layouts, main.poses, params.layout.cell_size)
+    placement = params.placement
+    if sum(meters.values()) < placement.unexplained_wall_limit - 1e-9:
+        return main, {}
+    sure = min(main.assembly.probability, placement.unexplained_wall_confidence)
+    doubted = dataclasses.replace(main.assembly, probability=sure)
+    return dataclasses.replace(main, assembly=doubted), {k: round(v, 2) for k, v in meters.items()}
+
+
 _SLIDE_SIGMAS = 2.0  # how far a slid runner-up moves, in the slide's standard deviations
 
 
@@ -513,6 +531,7 @@ def place_site(
     report("refinement", 0.7)
     sigmas = _trusted_sigmas(site_hints, placement, pieces, params)
     main, alternatives, assemblies = _choose(layouts, pieces, placement, params, site_hints, sigmas)
+    main, unexplained = _check_walls(main, layouts, params)
     slid = 0
     doubted = main.assembly is not None and (
         main.assembly.probability < params.placement.closed_confidence
@@ -542,6 +561,8 @@ def place_site(
     diagnostics["evidence"] = {kind: kinds.count(kind) for kind in sorted(set(kinds))}
     if status == "open" and main.polygon is not None:
         diagnostics["unconfirmed_polygon"] = main.polygon.tolist()
+    if unexplained:
+        diagnostics["unexplained_walls"] = unexplained  # why a room that closes is doubted
     if slid:
         diagnostics["slid_alternatives"] = slid  # the runners-up are this room resized
     if main.polygon is not None and not main.rectilinear:

@@ -67,6 +67,10 @@ class LocalLayout:
     boundary band of the cutting planes through the source and target.
     footprint: (F, 2) float64, aligned frame: centres of the coarse floor-plan cells the
     scan covers (where the scanner saw space); they must end up inside the room.
+    unchained_walls: (W, 2) float64, aligned frame: centres of the wall cells with high
+    evidence (:meth:`services.wall_lines.WallLine.high_cells`) that no wall of the chain runs
+    through: a notch or fin the chain cut across, a wall it skipped, the next room's wall
+    seen through a door. Inside the room, only a wall of the floorplan explains them.
     evidence: what the chain rests on: ``"cloud"``, ``"thin_cloud"`` (fewer points than any
     cloud the confidence was fitted on) or ``"frame"`` (RGB-D frames). The last two are
     wrong more often in ways no placement term sees, so rooms of them are calibrated apart.
@@ -78,6 +82,7 @@ class LocalLayout:
     target_boundary: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
     footprint: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     evidence: Evidence = "cloud"
+    unchained_walls: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
 
     @property
     def ok(self) -> bool:

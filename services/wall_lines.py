@@ -151,6 +151,21 @@ class WallLine:
         unknown = ~occupied & ~self.seen_through[i0:i1]
         return int(np.count_nonzero(occupied)), int(np.count_nonzero(unknown))
 
+    def high_cells(self, min_cells: int) -> FloatArray:
+        """(H, 2) centres of the high-evidence cells in runs of at least ``min_cells``
+        (gaps of two cells bridged, as a wall is): the wall this line shows, wherever a
+        chain uses it or not. Empty on a deduced wall."""
+        if self.virtual:
+            return np.zeros((0, 2))
+        spans = _runs(self.high, _MAX_GAP_CELLS, min_cells)
+        cells = np.concatenate(
+            [np.zeros(0, dtype=np.int64), *(np.flatnonzero(self.high[i:j]) + i for i, j in spans)]
+        )
+        run = self.origin + (cells + 0.5) * self.cell_size
+        offset = np.full(len(run), self.offset)
+        centres: FloatArray = np.column_stack([run, offset] if self.axis == 0 else [offset, run])
+        return centres
+
     def point(self, run: float) -> FloatArray:
         """The (x, y) point at run coordinate ``run`` on this line."""
         return np.array([run, self.offset] if self.axis == 0 else [self.offset, run])

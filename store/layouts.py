@@ -39,12 +39,13 @@ def layout_to_wire(layout: LocalLayout) -> LocalLayoutWire:
         target_boundary=encode_array(layout.target_boundary),
         footprint=encode_array(layout.footprint),
         evidence=layout.evidence,
+        unchained_walls=encode_array(layout.unchained_walls),
     )
 
 
 def layout_from_wire(wire: LocalLayoutWire) -> LocalLayout:
     """Inverse of :func:`layout_to_wire`: (K, 2) keypoints, (M, 3) boundaries, (F, 2)
-    footprint, all float64 in the aligned frame."""
+    footprint, (W, 2) unchained walls, all float64 in the aligned frame."""
     frame = ManhattanFrame(
         rotation=np.asarray(wire.rotation, dtype=np.float64),
         floor_z=wire.floor_z,
@@ -57,4 +58,5 @@ def layout_from_wire(wire: LocalLayoutWire) -> LocalLayout:
         target_boundary=decode_array(wire.target_boundary, 3),
         footprint=decode_array(wire.footprint, 2),
         evidence=wire.evidence,
+        unchained_walls=decode_array(wire.unchained_walls, 2),
     )

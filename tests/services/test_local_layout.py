@@ -9,7 +9,13 @@ import pytest
 
 from schemas.params import LayoutParams, PipelineParams
 from services.evaluation import acc_local, local_layout_correct
-from services.local_layout import boundary_points, estimate_local_layout, footprint_cells
+from services.local_layout import (
+    boundary_points,
+    estimate_local_layout,
+    footprint_cells,
+    unchained_walls,
+)
+from services.wall_lines import WallLine
 from tests.conftest import small_scene
 
 pytestmark = pytest.mark.timeout(300)
@@ -97,3 +103,74 @@ def test_a_cloud_thinner_than_the_calibrations_is_a_thin_cloud():
     assert estimate_local_layout(thin).evidence == "thin_cloud"
     trusting = PipelineParams(layout=LayoutParams(min_calibrated_points=0))
     assert estimate_local_layout(thin, trusting).evidence == "cloud"
+
+
+def _high_line(axis: int, offset: float, start: float, stop: float) -> WallLine:
+    """A line whose cells (0.08 m) are high from run ``start`` to ``stop``."""
+    high = np.zeros(100, dtype=bool)
+    high[round(start / 0.08) : round(stop / 0.08)] = True
+    return WallLine(axis, offset, 1, 0.0, 0.08, high, np.array([[start, stop]]))
+
+
+def test_unchained_walls_are_the_wall_cells_off_the_chain():
+    chain = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 3.0]])
+    lines = [
+        _high_line(0, 0.05, 0.0, 4.0),  # the chain's bottom wall (5 cm off: the same wall)
+        _high_line(1, 4.0, 0.0, 3.0),  # its right wall
+        _high_line(1, 2.0, 0.8, 1.6),  # a fin's face standing in the room: off the chain
+    ]
+    tops = np.column_stack([np.full(200, 2.02), np.linspace(0.0, 3.0, 200)])  # walls' tops
+    cells = unchained_walls(lines, chain, tops, LayoutParams())
+    assert len(cells) == 10
+    assert np.all(cells[:, 0] == 2.0)
+    assert cells[:, 1].min() == pytest.approx(0.84) and cells[:, 1].max() == pytest.approx(1.56)
+    assert len(unchained_walls(lines[:2], chain, tops, LayoutParams())) == 0
+    # Without wall points just under the ceiling there, it is tall furniture, not a wall;
+    # a stray point or two there (an outlier, a noisy normal) does not make it one.
+    beside = tops[tops[:, 1] < 0.7]
+    assert len(unchained_walls(lines, chain, beside, LayoutParams())) == 0
+    strays = np.vstack([beside, [[2.0, 1.2], [2.01, 1.21]]])
+    assert len(unchained_walls(lines, chain, strays, LayoutParams())) == 0
+
+
+def _corner_with_shaft_and_wardrobe(rng: np.random.Generator) -> np.ndarray:
+    """A scan of a room's corner (walls y = 0 and x = 0, 2.6 m high) with a 1.2 m square
+    shaft standing in the room (full height) and a 2.3 m wardrobe against the wall y = 0."""
+    height = 2.6
+
+    def box(n: int, lo: tuple[float, ...], hi: tuple[float, ...]) -> np.ndarray:
+        return rng.uniform(lo, hi, size=(n, 3))
+
+    points = np.vstack(
+        [
+            box(12000, (0, 0, 0), (6, 0, height)),
+            box(10000, (0, 0, 0), (0, 5, height)),
+            box(20000, (0, 0, 0), (6, 5, 0)),
+            box(20000, (0, 0, height), (6, 5, height)),
+            box(3000, (3, 2.5, 0), (4.2, 2.5, height)),
+            box(3000, (3, 3.7, 0), (4.2, 3.7, height)),
+            box(3000, (3, 2.5, 0), (3, 3.7, height)),
+            box(3000, (4.2, 2.5, 0), (4.2, 3.7, height)),
+            box(2500, (4.5, 0.6, 0), (5.5, 0.6, 2.3)),
+        ]
+    )
+    x, y, z = points.T
+    in_shaft = (x > 3.0) & (x < 4.2) & (y > 2.5) & (y < 3.7) & ((z < 0.01) | (z > height - 0.01))
+    behind_wardrobe = (x > 4.5) & (x < 5.5) & (y < 0.6) & (z < 2.25)
+    kept = points[~in_shaft & ~behind_wardrobe]
+    return kept + rng.normal(0.0, 0.005, size=kept.shape)
+
+
+def test_a_layout_keeps_the_walls_off_its_chain_that_rise_to_the_ceiling():
+    layout = estimate_local_layout(_corner_with_shaft_and_wardrobe(np.random.default_rng(0)))
+    assert len(layout.keypoints) == 3  # the corner
+    cells = layout.unchained_walls
+    assert len(cells) > 40
+    # The shaft's four faces (1.2 m each) and nothing else: the wardrobe's front passes
+    # the wall tests but stops 0.3 m under the ceiling.
+    shaft = (cells[:, 0] > 2.9) & (cells[:, 0] < 4.3) & (cells[:, 1] > 2.4) & (cells[:, 1] < 3.8)
+    assert shaft.all()
+    on_faces = np.minimum(
+        np.abs(cells[:, 0] - [[3.0], [4.2]]).min(0), np.abs(cells[:, 1] - [[2.5], [3.7]]).min(0)
+    )
+    assert on_faces.max() < 0.05

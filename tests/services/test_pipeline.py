@@ -590,3 +590,32 @@ def test_a_doubted_wall_that_may_slide_along_itself_is_offered_elsewhere():
         offsets.append(moved[0, 3] - wall[0, 3])
         assert abs(moved[1, 3] - wall[1, 3]) < 0.02  # along its wall only
     assert min(offsets) < -0.2 and max(offsets) > 0.2
+
+
+def _room_of_two(walls_in_most: np.ndarray) -> dict[str, LocalLayout]:
+    """The 10 x 6 m room of two pieces that closes (above); ``walls_in_most``: the walls
+    the larger scan shows off its chain (its aligned frame is the room's)."""
+    frame = ManhattanFrame(rotation=np.eye(3), floor_z=0.0, ceiling_z=2.7)
+    most = np.array([[4.0, 0.0], [10.0, 0.0], [10.0, 6.0], [0.0, 6.0], [0.0, 0.0], [0.5, 0.0]])
+    return {
+        "most": LocalLayout(keypoints=most, frame=frame, unchained_walls=walls_in_most),
+        "wall": LocalLayout(keypoints=np.array([[1.0, 0.0], [2.2, 0.0]]), frame=frame),
+    }
+
+
+def test_a_room_that_misses_a_wall_its_scans_show_is_not_said_closed():
+    # A fin's face 1 m long stands 3 m into the room: no chain follows it, so the floorplan
+    # that closes is not the room's shape, however well it closes.
+    fin = np.column_stack([np.full(13, 3.0), 0.4 + 0.08 * np.arange(13)])
+    result = place_site(_room_of_two(fin))
+    assert result.status != "closed"
+    assert result.confidence <= PipelineParams().placement.unexplained_wall_confidence
+    assert result.diagnostics["unexplained_walls"] == {"most": pytest.approx(13 * 0.08)}
+
+
+def test_walls_on_the_floorplan_or_beyond_it_leave_the_room_closed():
+    on_wall = np.column_stack([np.full(13, 9.9), 2.0 + 0.08 * np.arange(13)])
+    beyond = np.column_stack([3.0 + 0.08 * np.arange(13), np.full(13, -1.5)])
+    result = place_site(_room_of_two(np.vstack([on_wall, beyond])))
+    assert result.status == "closed"
+    assert "unexplained_walls" not in result.diagnostics

@@ -259,3 +259,20 @@ def test_high_evidence_beyond_a_point_is_measured_along_the_line() -> None:
     assert line.high_run_beyond(0.95, 1) == pytest.approx(2.3 - 1.0)  # starts a cell on
     assert line.high_run_beyond(2.35, -1) == pytest.approx(2.3 - 1.0, abs=0.11)
     assert line.high_run_beyond(0.5, 1) == 0.0  # nothing within two cells of the point
+
+
+def test_high_cells_are_the_centres_of_runs_long_enough_to_be_walls() -> None:
+    high = np.zeros(20, dtype=bool)
+    high[[1, 2, 4, 5]] = True  # one run (a gap of one cell bridged), 4 high cells
+    high[[10, 11]] = True  # too short for a wall of 3 cells
+    along_x = _occupied_line(high, axis=0, offset=2.0)
+    centres = along_x.high_cells(min_cells=3)
+    assert centres[:, 0] == pytest.approx([0.15, 0.25, 0.45, 0.55])
+    assert np.all(centres[:, 1] == 2.0)
+    along_y = _occupied_line(high, axis=1, offset=-1.0)
+    assert along_y.high_cells(min_cells=3)[:, ::-1] == pytest.approx(
+        np.column_stack([[0.15, 0.25, 0.45, 0.55], np.full(4, -1.0)])
+    )
+    assert len(along_x.high_cells(min_cells=2)) == 6
+    deduced = dataclasses.replace(along_x, virtual=True)
+    assert deduced.high_cells(min_cells=3).shape == (0, 2)

@@ -23,6 +23,7 @@ def test_layout_survives_the_wire_format():
     assert np.array_equal(back.keypoints, layout.keypoints)
     assert np.array_equal(back.source_boundary, layout.source_boundary)
     assert np.array_equal(back.footprint, layout.footprint)
+    assert np.array_equal(back.unchained_walls, layout.unchained_walls)
     assert np.array_equal(back.frame.rotation, layout.frame.rotation)
 
 
@@ -33,6 +34,18 @@ def test_what_a_layout_rests_on_survives_the_wire(evidence: Evidence) -> None:
     )
     wire = LocalLayoutWire.model_validate_json(layout_to_wire(layout).model_dump_json())
     assert layout_from_wire(wire).evidence == evidence
+
+
+def test_the_walls_a_chain_does_not_follow_survive_the_wire():
+    cells = np.array([[3.0, 0.34], [3.0, 0.42], [-1.5, 2.0]])
+    layout = dataclasses.replace(
+        scene_layouts()[small_scene("easy", 0).fragments[0].id], unchained_walls=cells
+    )
+    wire = LocalLayoutWire.model_validate_json(layout_to_wire(layout).model_dump_json())
+    assert np.array_equal(layout_from_wire(wire).unchained_walls, cells)
+    old = layout_to_wire(layout).model_dump(mode="json")
+    del old["unchained_walls"]  # stored before the field existed: none known
+    assert layout_from_wire(LocalLayoutWire.model_validate(old)).unchained_walls.shape == (0, 2)
 
 
 def test_a_stored_layout_without_its_evidence_is_a_clouds():
