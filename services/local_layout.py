@@ -12,7 +12,7 @@ from services.geometry import distance_to_chain
 from services.manhattan import estimate_manhattan_frame, thin_with_normals
 from services.types import Evidence, FloatArray, LocalLayout, ProgressFn
 from services.wall_graph import find_wall_chain
-from services.wall_lines import WallLine, find_wall_lines
+from services.wall_lines import WallLine, find_wall_lines, scan_top
 
 __all__ = [
     "FOOTPRINT_CELL",
@@ -110,7 +110,7 @@ def wall_points_under_ceiling(
     top of the scan when it saw no ceiling), aligned frame."""
     if len(aligned) == 0:
         return np.zeros((0, 2))
-    top = ceiling_z if ceiling_z is not None else float(np.percentile(aligned[:, 2], 99.5))
+    top = scan_top(aligned, ceiling_z)
     near = (aligned[:, 2] > top - _UNDER_CEILING) & (np.abs(normals[:, 2]) < _VERTICAL)
     positions: FloatArray = aligned[near, :2]
     return positions

@@ -91,6 +91,10 @@ class LocalLayout:
 
     def keypoints_local(self) -> FloatArray:
         """(K, 3) keypoints in the fragment-local frame, at floor height."""
-        k = len(self.keypoints)
-        aligned = np.column_stack([self.keypoints, np.full(k, self.frame.floor_z)])
-        return aligned @ self.frame.rotation  # rotation is orthonormal: R^T applied row-wise
+        return self.floor_points_local(self.keypoints)
+
+    def floor_points_local(self, xy: FloatArray) -> FloatArray:
+        """(M, 3) fragment-local positions of (M, 2) aligned-frame points at floor height."""
+        aligned = np.column_stack([xy, np.full(len(xy), self.frame.floor_z)])
+        local: FloatArray = aligned @ self.frame.rotation  # orthonormal: R^T row-wise
+        return local

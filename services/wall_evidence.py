@@ -49,8 +49,7 @@ def unexplained_walls(
         cells = layout.unchained_walls
         if len(cells) == 0:
             continue
-        aligned = np.column_stack([cells, np.full(len(cells), layout.frame.floor_z)])
-        site = (aligned @ layout.frame.rotation) @ pose[:3, :3].T + pose[:3, 3]
+        site = layout.floor_points_local(cells) @ pose[:3, :3].T + pose[:3, 3]
         xy = site[:, :2]
         inside = points_in_polygon(xy, polygon) & (distance_to_polygon(xy, polygon) > _ON_FLOORPLAN)
         if inside.any():

@@ -24,7 +24,7 @@ from schemas.params import LayoutParams
 from services.frustum import CameraView, visible_band
 from services.types import FloatArray
 
-__all__ = ["MAX_DOORWAY", "WallLine", "evidence_threshold", "find_wall_lines"]
+__all__ = ["MAX_DOORWAY", "WallLine", "evidence_threshold", "find_wall_lines", "scan_top"]
 
 _HIST_BIN = 0.01  # m, offset histogram resolution
 _LINE_TOLERANCE = 0.05  # m, wall points kept around a line offset
@@ -485,6 +485,12 @@ def _bridge(a: WallLine, b: WallLine, run: float) -> WallLine:
     )
 
 
+def scan_top(aligned: FloatArray, ceiling_z: float | None) -> float:
+    """The ceiling's height, or the top of the scan (bar outliers) when it saw no ceiling;
+    ``aligned``: (M, 3) points, M > 0, aligned frame."""
+    return ceiling_z if ceiling_z is not None else float(np.percentile(aligned[:, 2], 99.5))
+
+
 def find_wall_lines(
     aligned: FloatArray,
     normals: FloatArray,
@@ -506,7 +512,7 @@ def find_wall_lines(
     """
     if len(aligned) == 0:
         return []
-    top = ceiling_z if ceiling_z is not None else float(np.percentile(aligned[:, 2], 99.5))
+    top = scan_top(aligned, ceiling_z)
     in_band = (aligned[:, 2] > floor_z + 0.1) & (aligned[:, 2] < top - 0.1)
     band = max(top - floor_z - 0.2, params.cell_size)
     # Scanned space is told by points on horizontal surfaces (floor, ceiling, table tops):
