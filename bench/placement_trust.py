@@ -33,11 +33,12 @@ from rich import box
 from rich.console import Console
 from rich.table import Table
 
-from bench.scoring import alternative_results, share_interval
+from bench.scoring import alternative_results, params_with, share_interval
 from bench.world_scenes import (
     BUCKETS,
     DEFAULT_CACHE,
     CachedScene,
+    bucket_groups,
     bucket_of,
     build_sets,
     load_set,
@@ -60,6 +61,7 @@ ABLATIONS = {
     "w/o free space": {"use_free_space": False},
     "w/o closure": {"use_closure": False},
     "w/o complexity": {"use_complexity": False},
+    "w/o floor outside": {"use_outside": False},
 }
 CONFIDENCE_BINS = (0.0, 0.3, 0.5, 0.7, 0.8, 0.9, 0.95, 0.98, 1.0001)
 
@@ -160,17 +162,6 @@ def _mean_median(values: Sequence[float]) -> str:
     return f"{np.mean(finite):.2f} / {np.median(finite):.2f}" if finite else "-"
 
 
-def _groups(outcomes: Sequence[Outcome]) -> list[tuple[str, list[Outcome]]]:
-    groups = []
-    for name in sorted({o.name for o in outcomes}):
-        for lo, hi in BUCKETS:
-            members = [o for o in outcomes if o.name == name and lo <= o.n <= hi]
-            if members:
-                groups.append((f"{name} {lo}-{hi}", members))
-        groups.append((f"{name} all", [o for o in outcomes if o.name == name]))
-    return groups
-
-
 def bucket_table(outcomes: Sequence[Outcome], title: str) -> Table:
     """The main table: one row per set and bucket."""
     table = Table(title=title, title_justify="left", box=box.SIMPLE)
@@ -183,7 +174,7 @@ def bucket_table(outcomes: Sequence[Outcome], title: str) -> Table:
     ]  # fmt: skip
     for header in headers:
         table.add_column(header, justify="left" if header.startswith("set") else "right")
-    for label, rows in _groups(outcomes):
+    for label, rows in bucket_groups(outcomes, totals=True):
         closed = [o for o in rows if o.status == "closed"]
         layout = [o.layout_error for o in rows if o.layout_error is not None]
         seconds = [o.seconds for o in rows]
@@ -422,7 +413,11 @@ def noisy_priors(scene: CachedScene, sigma_xy: float, sigma_yaw_deg: float) -> H
 
 
 def hints_table(
-    scenes: Sequence[CachedScene], sigma_xy: float, sigma_yaw: float, rooms: str = "random rooms"
+    scenes: Sequence[CachedScene],
+    sigma_xy: float,
+    sigma_yaw: float,
+    rooms: str = "random rooms",
+    params: PipelineParams = PipelineParams(),
 ) -> Table:
     """Priors alone against priors with the layouts, per bucket."""
     title = (
@@ -448,7 +443,7 @@ def hints_table(
     for scene in scenes:
         hints = noisy_priors(scene, sigma_xy, sigma_yaw)
         alone = _prior_errors(scene, hints)
-        outcome = run_scene(scene, PipelineParams(), hints)
+        outcome = run_scene(scene, params, hints)
         rows.setdefault(outcome.bucket, []).append((outcome, alone))
     for label in sorted(rows, key=lambda b: int(b.split("-")[0])):
         pairs = rows[label]
@@ -500,6 +495,13 @@ def _arguments(argv: list[str] | None) -> argparse.Namespace:
     )
     parser.add_argument("--cues-scenes", type=int, default=60, help="0 to skip the AUC table")
     parser.add_argument("--dump", type=Path, help="write every scene's outcome to this JSON")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="SECTION.FIELD=VALUE",
+        help="an algorithm parameter other than its default, e.g. placement.use_outside=false",
+    )
     return parser.parse_args(argv)
 
 
@@ -521,9 +523,10 @@ def main(argv: list[str] | None = None) -> int:
     jobs = scene_jobs(args.split, per_bucket, real, args.cache)
     build_sets(jobs, args.workers, lambda line: console.log(f"layouts {line}"))
     scenes = list(load_set(jobs))
+    params = params_with(args.set)
     outcomes = []
     for scene in scenes:
-        outcome = run_scene(scene, PipelineParams())
+        outcome = run_scene(scene, params)
         outcomes.append(outcome)
         console.log(
             f"{scene.name} {scene.seed}: {scene.n_fragments} fragments, {outcome.status} "
@@ -543,10 +546,10 @@ def main(argv: list[str] | None = None) -> int:
     sigma_xy, sigma_yaw = args.hints_sigma
     if args.hints_per_bucket:
         hinted = _subset(scenes, args.hints_per_bucket)
-        console.print(hints_table(hinted, sigma_xy, sigma_yaw))
+        console.print(hints_table(hinted, sigma_xy, sigma_yaw, params=params))
     if args.hints_real:
         real_rooms = [s for s in scenes if s.name.endswith("_real")][: args.hints_real]
-        console.print(hints_table(real_rooms, sigma_xy, sigma_yaw, "real room shapes"))
+        console.print(hints_table(real_rooms, sigma_xy, sigma_yaw, "real room shapes", params))
     console.print(f"total {(time.perf_counter() - started) / 60:.1f} min")
     return 0
 

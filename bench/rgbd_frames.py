@@ -42,7 +42,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run as a script, the repository's packages are importable
 
-from bench.scoring import fit_logit_map, main_room_verdict  # noqa: E402
+from bench.scoring import fit_logit_map, main_room_verdict, params_with  # noqa: E402
 from schemas.params import PipelineParams  # noqa: E402
 from services.evaluation import evaluate_result  # noqa: E402
 from services.pipeline import align_fragments  # noqa: E402
@@ -159,9 +159,17 @@ def main() -> None:
     )
     parser.add_argument("--shapes", action="store_true", help="also real room shapes")
     parser.add_argument("--fit", action="store_true", help="fit the frames' calibration")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="SECTION.FIELD=VALUE",
+        help="an algorithm parameter other than its default, e.g. placement.use_outside=false",
+    )
     args = parser.parse_args()
+    params = params_with(args.set)
     if args.fit:
-        _fit(args.scenes, args.seed, args.shapes)
+        _fit(args.scenes, args.seed, args.shapes, params)
         return
     print(
         "| rooms | scenes | frames | ACC_local % | ACC_global % | rotation deg | "
@@ -169,11 +177,11 @@ def main() -> None:
         "CPU ms/frame median (p90) |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|")
-    print(_row("synthetic", run(args.scenes, args.seed)))
+    print(_row("synthetic", run(args.scenes, args.seed, None, params)))
     # Tune seeds (2000 and up) draw the shapes' tune split, held-out seeds its test split.
     outlines = _outlines("tune" if args.seed >= 2000 else "test") if args.shapes else []
     if outlines:
-        print(_row("MatterportLayout shapes", run(args.scenes, args.seed, outlines)))
+        print(_row("MatterportLayout shapes", run(args.scenes, args.seed, outlines, params)))
     print("paper (RGB-D and clouds): ACC_global 85.1 %, rotation 8.79 deg, translation 9.15 %")
 
 
@@ -190,9 +198,8 @@ def _outlines(split: str) -> list[FloatArray]:
     return [p for h, p in shapes if h in chosen and float(np.ptp(p, axis=0).max()) <= 9.0]
 
 
-def _fit(n_scenes: int, first_seed: int, shapes: bool) -> None:
+def _fit(n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams) -> None:
     """Fit and print the frames' calibration on synthetic (and tune-split shaped) rooms."""
-    params = PipelineParams()
     off = params.model_copy(
         update={"placement": params.placement.model_copy(update={"frame_calibration": (0, 1)})}
     )

@@ -4,14 +4,15 @@ map of the confidence's logit fitted for one kind of evidence."""
 
 from __future__ import annotations
 
+import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize
 
-from schemas.params import PlacementParams
+from schemas.params import PipelineParams, PlacementParams
 from services.evaluation import evaluate_result
 from services.layout_model import build_polygon
 from services.pipeline import fragment_pose
@@ -26,6 +27,7 @@ __all__ = [
     "fit_logistic",
     "fit_logit_map",
     "main_room_verdict",
+    "params_with",
     "share_interval",
     "true_assembly",
 ]
@@ -164,3 +166,30 @@ def share_interval(right: int, total: int, z: float = 1.96) -> tuple[float, floa
     centre = (share + scale / 2) / (1 + scale)
     half = z * math.sqrt(share * (1 - share) / total + scale / (4 * total)) / (1 + scale)
     return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def params_with(settings: Iterable[str]) -> PipelineParams:
+    """The default parameters with ``SECTION.FIELD=VALUE`` settings applied (VALUE as JSON,
+    or else a string), validated: how a benchmark measures a change without editing code.
+
+    >>> params_with(["placement.weight_outside=0"]).placement.weight_outside
+    0.0
+    """
+    sections: dict[str, dict[str, Any]] = {}
+    for setting in settings:
+        key, _, raw = setting.partition("=")
+        section, _, name = key.partition(".")
+        try:
+            value = json.loads(raw)
+        except json.JSONDecodeError:
+            value = raw
+        sections.setdefault(section, {})[name] = value
+    data = PipelineParams().model_dump()
+    for section, values in sections.items():
+        if section not in data or not isinstance(data[section], dict):
+            raise ValueError(f"no parameter section {section!r}")
+        unknown = set(values) - set(data[section])
+        if unknown:
+            raise ValueError(f"{section}: no parameter {sorted(unknown)}")
+        data[section].update(values)
+    return PipelineParams.model_validate(data)

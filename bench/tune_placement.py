@@ -21,7 +21,10 @@ first round's weights, as the search's candidates depend on them).
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import json
 import sys
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,15 +46,16 @@ from schemas.params import PlacementParams
 from services.confidence import CALIBRATION_FEATURES, calibration_features, same_room_groups
 from services.evaluation import evaluate_result
 from services.placement import PlacementCandidate, evaluate_placement, make_piece, place_pieces
-from services.placement.energy import FEATURES
+from services.placement.energy import FEATURES, feature_weights
 
 __all__ = ["SceneCandidates", "collect", "fit_calibration", "fit_weights", "main"]
 
 FITTED = FEATURES[:-1]  # the hints' prior is already a negative log-likelihood
 _WEIGHT_FIELDS = (
     "weight_turn", "weight_hull", "weight_closure",
-    "weight_structure", "weight_boundary", "weight_conflict",
+    "weight_structure", "weight_boundary", "weight_conflict", "weight_outside",
 )  # fmt: skip
+assert len(_WEIGHT_FIELDS) == len(FITTED), "one weight field per fitted feature"
 _TARGET_RIGHT = 0.99
 
 
@@ -100,9 +104,49 @@ def _scene_candidates(scene: CachedScene, params: PlacementParams) -> SceneCandi
     )
 
 
-def collect(scenes: list[CachedScene], params: PlacementParams) -> list[SceneCandidates]:
-    """Place every scene and score each assembly the search returns."""
-    return [_scene_candidates(scene, params) for scene in scenes]
+def collect(
+    scenes: list[CachedScene], params: PlacementParams, workers: int = 1
+) -> list[SceneCandidates]:
+    """Place every scene and score each assembly the search returns (``workers``
+    processes)."""
+    if workers <= 1:
+        return [_scene_candidates(scene, params) for scene in scenes]
+    with ProcessPoolExecutor(workers) as pool:
+        return list(pool.map(_scene_candidates, scenes, [params] * len(scenes), chunksize=4))
+
+
+def save_candidates(data: list[SceneCandidates], path: Path) -> None:
+    """Write collected assemblies as JSON (a refit then needs no search)."""
+    rows = []
+    for scene in data:
+        row = dataclasses.asdict(scene)
+        for key, value in row.items():
+            if isinstance(value, np.ndarray):
+                row[key] = value.tolist()
+        rows.append(row)
+    path.write_text(json.dumps({"features": list(FITTED), "scenes": rows}))
+
+
+def load_candidates(path: Path) -> list[SceneCandidates]:
+    """Assemblies written by :func:`save_candidates` (with the same features)."""
+    record = json.loads(path.read_text())
+    if record["features"] != list(FITTED):
+        raise ValueError(f"{path}: features {record['features']}, want {list(FITTED)}")
+    out = []
+    for row in record["scenes"]:
+        missed = row["missed_truth"]
+        out.append(
+            SceneCandidates(
+                row["n"],
+                np.asarray(row["features"], dtype=np.float64).reshape(-1, len(FITTED)),
+                np.asarray(row["right"], dtype=bool),
+                np.asarray(row["groups"], dtype=int),
+                row["truncated"],
+                None if missed is None else np.asarray(missed, dtype=np.float64),
+                row["missed_truth_right"],
+            )
+        )
+    return out
 
 
 def _pool(a: SceneCandidates, b: SceneCandidates) -> SceneCandidates:
@@ -146,22 +190,27 @@ def fit_weights(data: list[SceneCandidates], ridge: float = 0.01) -> np.ndarray:
     return np.asarray(np.exp(solution.x))
 
 
-def fit_calibration(data: list[SceneCandidates], w: np.ndarray) -> tuple[float, float, float]:
-    """(temperature, u0, u1): energies / temperature, 'none of these' at u0 + u1 * pieces."""
+def fit_calibration(
+    data: list[SceneCandidates], w: np.ndarray, temperature: float | None = None
+) -> tuple[float, float, float]:
+    """(temperature, u0, u1): energies / temperature, 'none of these' at u0 + u1 * pieces;
+    a given temperature is kept."""
     sets = [(s.features @ w, s.right, s.n) for s in data if len(s.right)]
 
     def loss(x: np.ndarray) -> float:
-        temperature, u0, u1 = np.exp(x[0]), x[1], x[2]
+        t = np.exp(x[0]) if temperature is None else temperature
+        u0, u1 = x[1], x[2]
         total = 0.0
         for energies, right, n in sets:
-            scaled = (energies - energies.min()) / temperature
+            scaled = (energies - energies.min()) / t
             logits = np.append(-scaled, -(u0 + u1 * n))
             norm = logsumexp(logits)
             total -= (logsumexp(-scaled[right]) if right.any() else logits[-1]) - norm
         return total
 
     solution = minimize(loss, np.array([0.0, 3.0, 0.0]), method="Nelder-Mead")
-    return float(np.exp(solution.x[0])), float(solution.x[1]), float(solution.x[2])
+    fitted = float(np.exp(solution.x[0])) if temperature is None else temperature
+    return fitted, float(solution.x[1]), float(solution.x[2])
 
 
 def main_rooms(
@@ -221,20 +270,37 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--real", type=int, default=48)
     parser.add_argument("--rounds", type=int, default=1)
     parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
+    parser.add_argument("--workers", type=int, default=2, help="processes placing scenes")
+    parser.add_argument("--save", type=Path, help="write the first round's assemblies here")
+    parser.add_argument("--load", type=Path, help="fit on assemblies saved by --save")
+    parser.add_argument(
+        "--keep-weights",
+        action="store_true",
+        help="fit only the 'none of these' energy and the calibration: the energy's weights "
+        "(and temperature) stay the current ones",
+    )
     args = parser.parse_args(argv)
     console = Console()
-    jobs = scene_jobs("tune", args.per_bucket, args.real, args.cache)
-    build_sets(jobs, 2, lambda line: console.log(f"layouts {line}"))
-    scenes = list(load_set(jobs))
+    scenes: list[CachedScene] = []
+    if args.load is None:
+        jobs = scene_jobs("tune", args.per_bucket, args.real, args.cache)
+        build_sets(jobs, 2, lambda line: console.log(f"layouts {line}"))
+        scenes = list(load_set(jobs))
     params = PlacementParams()
+    current = feature_weights(params)[: len(FITTED)]
     pooled: list[SceneCandidates] = []
     for round_ in range(args.rounds):
-        data = collect(scenes, params)
+        if args.load is not None:
+            data = load_candidates(args.load)
+        else:
+            data = collect(scenes, params, args.workers)
+            if args.save is not None and round_ == 0:
+                save_candidates(data, args.save)
         # Each round's assemblies join the earlier ones': the weights must tell the truth
         # from what any of the searches so far preferred.
         pooled = data if not pooled else [_pool(a, b) for a, b in zip(pooled, data, strict=True)]
-        w = fit_weights(pooled)
-        calibration = fit_calibration(data, w)
+        w = current if args.keep_weights else fit_weights(pooled)
+        calibration = fit_calibration(data, w, 1.0 if args.keep_weights else None)
         temperature, u0, u1 = calibration
         fitted = dict(zip(_WEIGHT_FIELDS, (w / temperature).round(3).tolist(), strict=True))
         fitted |= {"unexplored_energy": round(u0, 3), "unexplored_per_piece": round(u1, 3)}

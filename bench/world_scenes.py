@@ -18,11 +18,11 @@ import dataclasses
 import json
 import os
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, Protocol, TypeVar
 
 import numpy as np
 
@@ -38,6 +38,7 @@ __all__ = [
     "CACHE_VERSION",
     "CachedScene",
     "Split",
+    "bucket_groups",
     "bucket_of",
     "build_sets",
     "load_set",
@@ -81,6 +82,30 @@ def bucket_of(n: int) -> str:
         if lo <= n <= hi:
             return f"{lo}-{hi}"
     return f"{n}"
+
+
+class _Scored(Protocol):
+    @property
+    def name(self) -> str: ...  # the scene set, e.g. "test_real"
+    @property
+    def n(self) -> int: ...  # the scene's fragment count
+
+
+_Row = TypeVar("_Row", bound=_Scored)
+
+
+def bucket_groups(rows: Sequence[_Row], totals: bool = False) -> list[tuple[str, list[_Row]]]:
+    """Rows grouped by scene set and fragment-count bucket ("test_real 2-3", ...), in the
+    buckets' order; with ``totals`` each set's rows also as "<set> all"."""
+    groups = []
+    for name in sorted({r.name for r in rows}):
+        for lo, hi in BUCKETS:
+            members = [r for r in rows if r.name == name and lo <= r.n <= hi]
+            if members:
+                groups.append((f"{name} {lo}-{hi}", members))
+        if totals:
+            groups.append((f"{name} all", [r for r in rows if r.name == name]))
+    return groups
 
 
 @dataclass(frozen=True)

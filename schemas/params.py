@@ -99,6 +99,9 @@ class PlacementParams(_Frozen):
     use_free_space: bool = Field(
         True, description="penalise walls through space another scan saw empty"
     )
+    use_outside: bool = Field(
+        True, description="penalise floor a scan saw that the closed room leaves outside"
+    )
     weight_turn: float = Field(0.728, ge=0, description="energy per junction that turns")
     weight_hull: float = Field(0.574, ge=0, description="energy per convex-hull edge")
     weight_closure: float = Field(0.28, ge=0, description="weight of the closure likelihood")
@@ -106,6 +109,21 @@ class PlacementParams(_Frozen):
     weight_boundary: float = Field(2.604, ge=0, description="weight of the boundary mismatch")
     weight_conflict: float = Field(
         0.804, ge=0, description="energy per meter of wall through another scan's seen space"
+    )
+    weight_outside: float = Field(
+        2.5, ge=0, description="energy per m² of seen floor the closed room leaves outside"
+    )
+    outside_cap: float = Field(
+        1.0,
+        gt=0,
+        description="the most seen floor outside the room that counts per piece (floor seen "
+        "through a doorway, past a chain a little wrong, is outside the true room too), m²",
+    )
+    outside_margin: float = Field(
+        0.3,
+        ge=0,
+        description="seen floor counts as outside the room only this far beyond its boundary "
+        "(the unrefined loop's junctions may be off by an overlap or gap), m",
     )
     junction_mean: float = Field(
         0.0, description="mean hidden displacement along the wall at a junction (overlap < 0), m"

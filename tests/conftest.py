@@ -36,6 +36,7 @@ __all__ = [
     "end_boxes",
     "end_shell",
     "overlapping_halves",
+    "point_at_arc",
     "scene_layouts",
     "small_scene",
 ]
@@ -50,6 +51,7 @@ UNTUNED = PlacementParams(
     weight_structure=1.0,
     weight_boundary=1.0,
     weight_conflict=1.0,
+    weight_outside=1.0,
     unexplored_energy=3.0,
     unexplored_per_piece=0.0,
     confidence_coefficients=(0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0),
@@ -93,7 +95,8 @@ def _perimeter(polygon: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return closed, np.concatenate([[0.0], np.cumsum(lengths)])
 
 
-def _point_at(polygon: np.ndarray, arc: float) -> np.ndarray:
+def point_at_arc(polygon: np.ndarray, arc: float) -> np.ndarray:
+    """The point at arc length ``arc`` along a closed polygon's boundary."""
     closed, cum = _perimeter(polygon)
     arc = arc % cum[-1]
     i = int(np.searchsorted(cum, arc, side="right") - 1)
@@ -116,7 +119,7 @@ def chains_from_polygon(
             for i, c in enumerate(np.concatenate([cum[:-1], cum[:-1] + total]))
             if start < c < end
         ]
-        kp = np.vstack([_point_at(polygon, start), *corners, _point_at(polygon, end)])
+        kp = np.vstack([point_at_arc(polygon, start), *corners, point_at_arc(polygon, end)])
         kp = (kp - kp[0]) @ rot90(rotations[k]).T
         pieces.append(bare_piece(f"p{k}", kp))
     return pieces

@@ -15,6 +15,9 @@ is a weighted sum of features (paper 3.2, extended):
   (:func:`services.placement.evidence.structure_match`);
 * ``boundary``: the paper's boundary mismatch per junction;
 * ``conflict``: meters of wall that run through space another scan saw empty;
+* ``outside``: square meters of floor the scans saw that the closed loop leaves outside
+  (the room holds everything its scans saw; a room too small or folded the wrong way
+  does not);
 * ``prior``: disagreement with the fleet's hints (already a negative log-likelihood).
 
 The weights are fitted so that the energies, as a Boltzmann distribution over the
@@ -23,11 +26,13 @@ assemblies found, give calibrated probabilities (``bench/tune_placement.py``).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from schemas.params import PlacementParams
+from services.geometry import distance_to_polygon, points_in_polygon
 from services.placement.pieces import UNIT
 from services.types import FloatArray
 
@@ -38,9 +43,12 @@ __all__ = [
     "feature_weights",
     "hull_edges",
     "junction_displacement",
+    "outside_area",
 ]
 
-FEATURES = ("turns", "hull", "closure", "structure", "boundary", "conflict", "prior")
+FEATURES = (
+    "turns", "hull", "closure", "structure", "boundary", "conflict", "outside", "prior",
+)  # fmt: skip
 _HULL_TOLERANCE = 0.35  # m, hull vertices closer than this to their chord are dropped
 
 
@@ -83,6 +91,7 @@ def feature_weights(params: PlacementParams) -> FloatArray:
             params.weight_structure * params.use_structure,
             params.weight_boundary * params.use_boundary,
             params.weight_conflict * params.use_free_space,
+            params.weight_outside * params.use_outside,
             1.0,
         ]
     )
@@ -158,3 +167,32 @@ def hull_edges(points: FloatArray) -> int:
             break
         hull = np.delete(hull, weakest, axis=0)
     return len(hull)
+
+
+def outside_area(
+    cells: Sequence[FloatArray], cell: float, polygon: FloatArray, margin: float, cap: float
+) -> float:
+    """Square meters of seen floor lying outside a closed (V, 2) loop by more than
+    ``margin``, at most ``cap`` per piece; ``cells``: per piece, (M, 2) centres of the
+    free cells (side ``cell``) it saw.
+
+    A room holds all the floor its scans saw; floor seen beyond its walls says the room is
+    too small, or a piece faces the wrong way. The margin absorbs what the unrefined loop
+    still gets wrong at its junctions (overlaps and gaps along the walls, the closure gap);
+    the cap, floor seen through another scan's doorway or past a chain that is a little
+    wrong, which the true room shows too.
+
+    >>> square = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]])
+    >>> outside_area([np.array([[1.0, 1.0], [4.1, 1.0], [5.0, 1.0]])], 0.5, square, 0.3, 1.0)
+    0.25
+    """
+    counts = [len(c) for c in cells]
+    if sum(counts) == 0 or len(polygon) < 3:
+        return 0.0
+    xy = np.concatenate(cells)
+    far = ~points_in_polygon(xy, polygon)
+    if far.any():
+        far[far] = distance_to_polygon(xy[far], polygon) > margin
+    piece = np.repeat(np.arange(len(cells)), counts)
+    per_piece = np.bincount(piece, weights=far.astype(np.float64), minlength=len(cells))
+    return float(np.minimum(per_piece * cell * cell, cap).sum())

@@ -131,6 +131,12 @@ class FreeSpace:
         )
 
     @cached_property
+    def centres(self) -> FloatArray:
+        """(M, 2) centres of the free cells, this grid's frame."""
+        cells: FloatArray = (np.argwhere(self.grid) + 0.5) * self.cell + self.origin
+        return cells.reshape(-1, 2)
+
+    @cached_property
     def box(self) -> tuple[float, float, float, float]:
         """(x_lo, y_lo, x_hi, y_hi) of the free cells, as floats for quick tests."""
         return (float(self.lo[0]), float(self.lo[1]), float(self.hi[0]), float(self.hi[1]))
@@ -206,6 +212,11 @@ class Piece:
     def rotated_free(self) -> tuple[FreeSpace, ...]:
         """Per quarter turn r: the free space turned by r."""
         return tuple(self.free.rotated(r) for r in range(4))
+
+    @cached_property
+    def rotated_free_centres(self) -> tuple[FloatArray, ...]:
+        """Per quarter turn r: the free cells' centres turned by r (exact on the grid)."""
+        return tuple(self.free.centres @ rot90(r).T for r in range(4))
 
 
 def make_piece(fragment_id: str, layout: LocalLayout) -> Piece:

@@ -1,4 +1,5 @@
-"""The placement energy's terms: closure likelihood, junction noise, hull edges, weights."""
+"""The placement energy's terms: closure likelihood, junction noise, hull edges, weights,
+floor seen outside the room."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from services.placement.energy import (
     feature_weights,
     hull_edges,
     junction_displacement,
+    outside_area,
 )
 from services.placement.pieces import UNIT
 
@@ -164,6 +166,7 @@ SWITCHED = {
     "use_structure": ("structure",),
     "use_boundary": ("boundary",),
     "use_free_space": ("conflict",),
+    "use_outside": ("outside",),
 }
 
 
@@ -175,6 +178,7 @@ def test_feature_weights_follow_the_params():
         weight_structure=3.0,
         weight_boundary=0.25,
         weight_conflict=4.0,
+        weight_outside=5.0,
     )
     weights = dict(zip(FEATURES, feature_weights(params).tolist(), strict=True))
     assert weights == {
@@ -184,6 +188,7 @@ def test_feature_weights_follow_the_params():
         "structure": 3.0,
         "boundary": 0.25,
         "conflict": 4.0,
+        "outside": 5.0,
         "prior": 1.0,
     }
 
@@ -199,3 +204,39 @@ def test_a_switched_off_term_weighs_zero(switch):
         else:
             assert weights[name] == full[name] > 0.0
     assert weights["prior"] == 1.0  # hints are never switched off
+
+
+SQUARE = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]])
+
+
+def _cells(x0: float, x1: float, y0: float, y1: float, cell: float = 0.25) -> np.ndarray:
+    xs, ys = np.meshgrid(np.arange(x0, x1, cell) + cell / 2, np.arange(y0, y1, cell) + cell / 2)
+    return np.column_stack([xs.ravel(), ys.ravel()])
+
+
+def test_floor_inside_the_room_is_not_outside():
+    assert outside_area([_cells(0.0, 4.0, 0.0, 4.0)], 0.25, SQUARE, 0.3, 10.0) == 0.0
+
+
+def test_floor_within_the_margin_is_not_outside():
+    # One column of cells whose centres lie 0.125 m past the wall.
+    assert outside_area([_cells(4.0, 4.25, 0.0, 4.0)], 0.25, SQUARE, 0.3, 10.0) == 0.0
+
+
+def test_floor_beyond_the_margin_counts_its_area():
+    # A 1 x 2 m block from 0.5 m past the wall: 32 cells of 1/16 m².
+    area = outside_area([_cells(4.5, 5.5, 1.0, 3.0)], 0.25, SQUARE, 0.3, 10.0)
+    assert area == pytest.approx(2.0)
+
+
+def test_outside_floor_counts_at_most_the_cap_per_piece():
+    block = _cells(4.5, 5.5, 1.0, 3.0)
+    assert outside_area([block], 0.25, SQUARE, 0.3, 0.5) == pytest.approx(0.5)
+    assert outside_area([block, block], 0.25, SQUARE, 0.3, 0.5) == pytest.approx(1.0)
+
+
+def test_pieces_without_floor_add_nothing():
+    block = _cells(4.5, 5.5, 1.0, 3.0)
+    empty = np.zeros((0, 2))
+    assert outside_area([empty, block, empty], 0.25, SQUARE, 0.3, 10.0) == pytest.approx(2.0)
+    assert outside_area([empty], 0.25, SQUARE, 0.3, 10.0) == 0.0

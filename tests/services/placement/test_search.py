@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from schemas.params import PlacementParams
+from services.geometry import distance_to_chain, points_in_polygon
 from services.placement import (
     Piece,
     SiteHints,
@@ -18,8 +19,9 @@ from services.placement import (
     translations_of,
 )
 from services.placement import search as search_module
+from services.placement.pieces import FreeSpace
 from services.placement.priors import HintPair, PiecePrior
-from tests.conftest import UNTUNED, bare_piece, chains_from_polygon
+from tests.conftest import UNTUNED, bare_piece, chains_from_polygon, point_at_arc
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -525,6 +527,44 @@ def test_two_tied_rooms(l_room):
     orders = [c.order for c in placement.candidates[:2]]
     assert set(orders) == {("p0", "p1", "p2", "p3"), ("p0", "p2", "p1", "p3")}
     assert placement.candidates[1].energy == pytest.approx(placement.candidates[0].energy)
+
+
+def _seeing_floor(piece: Piece, room: np.ndarray, source: np.ndarray, reach: float) -> Piece:
+    """The piece (rotation 0, source at ``source`` in the room) with the room's floor within
+    ``reach`` of its walls as its seen free space."""
+    cell = 0.25
+    lo, hi = room.min(axis=0), room.max(axis=0)
+    xs, ys = np.meshgrid(np.arange(lo[0], hi[0], cell), np.arange(lo[1], hi[1], cell))
+    centres = np.column_stack([xs.ravel(), ys.ravel()]) + cell / 2
+    walls = piece.keypoints + source
+    near = distance_to_chain(centres, walls) <= reach
+    seen = centres[points_in_polygon(centres, room) & near] - source
+    origin = seen.min(axis=0) - cell / 2
+    ij = np.round((seen - origin) / cell - 0.5).astype(int)
+    grid = np.zeros(tuple(ij.max(axis=0) + 1), dtype=bool)
+    grid[ij[:, 0], ij[:, 1]] = True
+    free = FreeSpace(grid, origin, cell, seen.min(axis=0) - cell, seen.max(axis=0) + cell)
+    return dataclasses.replace(piece, free=free)
+
+
+@pytest.mark.parametrize("use_outside", [True, False])
+def test_floor_seen_outside_breaks_the_tie_of_two_rooms(l_room, use_outside):
+    # The tied L room's swapped assembly leaves floor a scan saw outside its walls.
+    pieces = chains_from_polygon(l_room, TIED_CUTS, [0, 0, 0, 0])
+    sources = [point_at_arc(l_room, cut) for cut in TIED_CUTS]
+    seeing = [_seeing_floor(p, l_room, s, 2.0) for p, s in zip(pieces, sources, strict=True)]
+    params = GEOMETRY.model_copy(update={"use_outside": use_outside})
+    placement = place_pieces(seeing, params)
+    assert placement is not None
+    best, runner_up = placement.candidates[:2]
+    if not use_outside:
+        assert runner_up.energy == pytest.approx(best.energy)
+        return
+    assert best.order == ("p0", "p1", "p2", "p3")
+    assert best.features["outside"] == 0.0
+    assert runner_up.order == ("p0", "p2", "p1", "p3")
+    assert runner_up.features["outside"] > 1.0
+    assert runner_up.energy == pytest.approx(best.energy + runner_up.features["outside"])
 
 
 @pytest.mark.parametrize("frame", [(0.0, (0.0, 0.0)), (0.5, (3.0, -1.0)), (-2.0, (-7.0, 4.0))])

@@ -1,0 +1,202 @@
+"""Why placements go wrong, per fragment-count bucket (issue 10).
+
+For every scene of a split whose main room is wrong, one cause:
+
+* ``layout``: a fragment's local layout is wrong by the paper's 5 % test, or was unusable
+  (no assembly of these chains can be the room);
+* ``not a loop``: the true order and turns do not make a valid closed loop of these chains
+  (walls cross, or a junction folds back): the search cannot return it;
+* ``search``: the true assembly has a lower energy than the best found (the search missed
+  it);
+* ``energy``: the energy ranks another assembly below the truth; the table then says by how
+  many nats and which terms favour the rival (weighted, truth minus best: positive means
+  the term prefers the rival);
+* ``geometry``: the main room is the true assembly (order and turns), yet its refined
+  floorplan fails the 5 % test (a room whose size the junctions leave loose, a notch no
+  chain saw);
+* ``ranking``: the truth has the lowest energy, yet the result's main room is another (the
+  ranking after refinement, the wall check or the calibration chose it).
+
+Run ``python -m bench.failure_anatomy`` (``--split``, ``--per-bucket``, ``--real``); it reads
+the layouts ``bench.placement_trust`` caches and builds those missing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections import Counter, defaultdict
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from rich import box
+from rich.console import Console
+from rich.table import Table
+
+from bench.scoring import params_with, true_assembly
+from bench.world_scenes import (
+    DEFAULT_CACHE,
+    CachedScene,
+    bucket_groups,
+    bucket_of,
+    build_sets,
+    load_set,
+    scene_jobs,
+)
+from schemas.params import PipelineParams
+from services.evaluation import evaluate_result
+from services.pipeline import place_site
+from services.placement import evaluate_placement, make_piece
+from services.placement.energy import FEATURES, feature_weights
+
+__all__ = ["CAUSES", "Anatomy", "anatomy_of", "main"]
+
+CAUSES = ("layout", "not a loop", "search", "energy", "geometry", "ranking")
+
+
+@dataclass(frozen=True)
+class Anatomy:
+    """One scene's verdict and, when wrong, its cause.
+
+    gap: truth's energy minus the main room's (nats), when both exist; terms: that gap per
+    energy term, weighted.
+    """
+
+    name: str
+    seed: int
+    n: int
+    right: bool
+    status: str
+    cause: str | None
+    gap: float | None = None
+    terms: dict[str, float] = field(default_factory=dict)
+
+
+def anatomy_of(scene: CachedScene, params: PipelineParams) -> Anatomy:
+    """Place one scene and, when its main room is wrong, say why."""
+    result = place_site(scene.layouts, params).model_dump(mode="json")
+    report = evaluate_result(result, scene.truth)
+    base = Anatomy(
+        scene.name, scene.seed, scene.n_fragments, report.global_correct, result["status"], None
+    )
+    if report.global_correct:
+        return base
+    usable = sorted(fid for fid, lay in scene.layouts.items() if lay.ok)
+    if len(usable) < scene.n_fragments or not all(report.local_correct.values()):
+        return _with(base, "layout")
+    pieces = [make_piece(fid, scene.layouts[fid]) for fid in usable]
+    order, rotations = true_assembly(scene.truth, scene.layouts, usable)
+    truth = evaluate_placement(pieces, order, rotations, params.placement)
+    if truth is None:
+        return _with(base, "not a loop")
+    energy = result["diagnostics"].get("energy")
+    if energy is None:
+        return _with(base, "search")
+    weights = dict(zip(FEATURES, feature_weights(params.placement), strict=True))
+    terms = {
+        name: weights[name] * (truth.features[name] - float(energy.get(name, 0.0)))
+        for name in FEATURES
+    }
+    gap = truth.energy - float(energy["total"])
+    lowest = min(float(a["energy"]) for a in result["diagnostics"]["assemblies"])
+    placed = sorted(
+        (f for f in result["fragments"] if f["loop_index"] is not None),
+        key=lambda f: f["loop_index"],
+    )
+    main_order = [f["id"] for f in placed]
+    k = main_order.index(order[0]) if order[0] in main_order else 0
+    same_loop = main_order[k:] + main_order[:k] == list(order)
+    if truth.energy < lowest - 1e-6:
+        cause = "search"
+    elif gap > 1e-6:
+        cause = "energy"
+    elif same_loop and abs(gap) <= 1e-6:
+        cause = "geometry"
+    else:
+        cause = "ranking"
+    return _with(base, cause, gap, terms)
+
+
+def _with(
+    base: Anatomy, cause: str, gap: float | None = None, terms: dict[str, float] | None = None
+) -> Anatomy:
+    return Anatomy(base.name, base.seed, base.n, base.right, base.status, cause, gap, terms or {})
+
+
+def cause_table(rows: Sequence[Anatomy]) -> Table:
+    """Wrong main rooms per bucket, by cause."""
+    table = Table(title="Wrong main rooms by cause", title_justify="left", box=box.SIMPLE)
+    for header in ("set / fragments", "scenes", "wrong", *CAUSES, "energy gap median nats"):
+        table.add_column(header, justify="left" if header.startswith("set") else "right")
+    for label, members in bucket_groups(rows):
+        wrong = [r for r in members if not r.right]
+        causes = Counter(r.cause for r in wrong)
+        gaps = [r.gap for r in wrong if r.cause == "energy" and r.gap is not None]
+        table.add_row(
+            label,
+            str(len(members)),
+            str(len(wrong)),
+            *(str(causes.get(c, 0)) for c in CAUSES),
+            f"{np.median(gaps):.2f}" if gaps else "-",
+        )
+    return table
+
+
+def term_table(rows: Sequence[Anatomy]) -> Table:
+    """For energy failures: each term's weighted share of the gap (truth minus rival)."""
+    table = Table(
+        title="Energy failures: what favours the rival (weighted nats, truth minus rival; "
+        "mean, and how often the term favours the rival)",
+        title_justify="left",
+        box=box.SIMPLE,
+    )
+    table.add_column("set / fragments")
+    table.add_column("rooms", justify="right")
+    for name in FEATURES:
+        table.add_column(name, justify="right")
+    for label, members in bucket_groups(rows):
+        energy = [r for r in members if r.cause == "energy"]
+        if not energy:
+            continue
+        cells = []
+        for name in FEATURES:
+            values = np.array([r.terms.get(name, 0.0) for r in energy])
+            cells.append(f"{values.mean():+.2f} ({np.mean(values > 1e-6):.0%})")
+        table.add_row(label, str(len(energy)), *cells)
+    return table
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the benchmark and print its tables; returns the exit code."""
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    parser.add_argument("--split", choices=("test", "tune"), default="test")
+    parser.add_argument("--per-bucket", type=int, default=30, help="random rooms per bucket")
+    parser.add_argument("--real", type=int, default=200, help="real room shapes (2-8 fragments)")
+    parser.add_argument("--workers", type=int, default=2, help="processes building layouts")
+    parser.add_argument("--list", action="store_true", help="print every wrong scene")
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
+        help="an algorithm parameter other than its default",
+    )  # fmt: skip
+    args = parser.parse_args(argv)
+    console = Console(width=None if sys.stdout.isatty() else 160)
+    jobs = scene_jobs(args.split, args.per_bucket, args.real, DEFAULT_CACHE)
+    build_sets(jobs, args.workers, lambda line: console.log(f"layouts {line}"))
+    params = params_with(args.set)
+    rows = [anatomy_of(scene, params) for scene in load_set(jobs)]
+    if args.list:
+        by_cause: dict[str, list[str]] = defaultdict(list)
+        for r in rows:
+            if not r.right:
+                gap = "" if r.gap is None else f" {r.gap:+.2f}"
+                by_cause[str(r.cause)].append(f"{r.seed}({bucket_of(r.n)}, {r.status}{gap})")
+        for cause, names in by_cause.items():
+            console.print(f"{cause}: {', '.join(names)}")
+    console.print(cause_table(rows))
+    console.print(term_table(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
