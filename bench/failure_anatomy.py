@@ -34,7 +34,7 @@ from rich import box
 from rich.console import Console
 from rich.table import Table
 
-from bench.scoring import params_with, true_assembly
+from bench.scoring import add_params_option, params_with, true_assembly
 from bench.world_scenes import (
     DEFAULT_CACHE,
     CachedScene,
@@ -175,10 +175,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--real", type=int, default=200, help="real room shapes (2-8 fragments)")
     parser.add_argument("--workers", type=int, default=2, help="processes building layouts")
     parser.add_argument("--list", action="store_true", help="print every wrong scene")
-    parser.add_argument(
-        "--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
-        help="an algorithm parameter other than its default",
-    )  # fmt: skip
+    add_params_option(parser)
     args = parser.parse_args(argv)
     console = Console(width=None if sys.stdout.isatty() else 160)
     jobs = scene_jobs(args.split, args.per_bucket, args.real, DEFAULT_CACHE)

@@ -33,7 +33,12 @@ from rich import box
 from rich.console import Console
 from rich.table import Table
 
-from bench.scoring import alternative_results, params_with, share_interval
+from bench.scoring import (
+    add_params_option,
+    alternative_results,
+    params_with,
+    share_interval,
+)
 from bench.world_scenes import (
     BUCKETS,
     DEFAULT_CACHE,
@@ -495,13 +500,7 @@ def _arguments(argv: list[str] | None) -> argparse.Namespace:
     )
     parser.add_argument("--cues-scenes", type=int, default=60, help="0 to skip the AUC table")
     parser.add_argument("--dump", type=Path, help="write every scene's outcome to this JSON")
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="SECTION.FIELD=VALUE",
-        help="an algorithm parameter other than its default, e.g. placement.use_outside=false",
-    )
+    add_params_option(parser)
     return parser.parse_args(argv)
 
 

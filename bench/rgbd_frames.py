@@ -42,7 +42,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run as a script, the repository's packages are importable
 
-from bench.scoring import fit_logit_map, main_room_verdict, params_with  # noqa: E402
+from bench.scoring import (  # noqa: E402
+    add_params_option,
+    fit_logit_map,
+    main_room_verdict,
+    params_with,
+)
 from schemas.params import PipelineParams  # noqa: E402
 from services.evaluation import evaluate_result  # noqa: E402
 from services.pipeline import align_fragments  # noqa: E402
@@ -159,13 +164,7 @@ def main() -> None:
     )
     parser.add_argument("--shapes", action="store_true", help="also real room shapes")
     parser.add_argument("--fit", action="store_true", help="fit the frames' calibration")
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="SECTION.FIELD=VALUE",
-        help="an algorithm parameter other than its default, e.g. placement.use_outside=false",
-    )
+    add_params_option(parser)
     args = parser.parse_args()
     params = params_with(args.set)
     if args.fit:

@@ -4,6 +4,7 @@ map of the confidence's logit fitted for one kind of evidence."""
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
@@ -22,6 +23,7 @@ from services.refinement import refine_translations
 from services.types import LocalLayout
 
 __all__ = [
+    "add_params_option",
     "alternative_results",
     "candidate_result",
     "fit_logistic",
@@ -193,3 +195,15 @@ def params_with(settings: Iterable[str]) -> PipelineParams:
             raise ValueError(f"{section}: no parameter {sorted(unknown)}")
         data[section].update(values)
     return PipelineParams.model_validate(data)
+
+
+def add_params_option(parser: argparse.ArgumentParser) -> None:
+    """A benchmark's ``--set SECTION.FIELD=VALUE`` option (repeatable), read by
+    :func:`params_with`."""
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="SECTION.FIELD=VALUE",
+        help="an algorithm parameter other than its default, e.g. placement.use_outside=false",
+    )
