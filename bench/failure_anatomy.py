@@ -2,8 +2,9 @@
 
 For every scene of a split whose main room is wrong, one cause:
 
-* ``layout``: a fragment's local layout is wrong by the paper's 5 % test, or was unusable
-  (no assembly of these chains can be the room);
+* ``layout``: a fragment's chain is wrong on the floor plan by the paper's 5 % test (its
+  keypoints seen from above: a floor height the scan could not see does not count), or it
+  was unusable (no assembly of these chains can be the room);
 * ``not a loop``: the true order and turns do not make a valid closed loop of these chains
   (walls cross, or a junction folds back): the search cannot return it;
 * ``search``: the true assembly has a lower energy than the best found (the search missed
@@ -28,6 +29,7 @@ import sys
 from collections import Counter, defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from rich import box
@@ -45,7 +47,7 @@ from bench.world_scenes import (
     scene_jobs,
 )
 from schemas.params import PipelineParams
-from services.evaluation import evaluate_result
+from services.evaluation import evaluate_result, keypoint_error
 from services.pipeline import place_site
 from services.placement import evaluate_placement, make_piece
 from services.placement.energy import FEATURES, feature_weights
@@ -83,7 +85,7 @@ def anatomy_of(scene: CachedScene, params: PipelineParams) -> Anatomy:
     if report.global_correct:
         return base
     usable = sorted(fid for fid, lay in scene.layouts.items() if lay.ok)
-    if len(usable) < scene.n_fragments or not all(report.local_correct.values()):
+    if len(usable) < scene.n_fragments or not _chains_right_in_plan(result, scene.truth):
         return _with(base, "layout")
     pieces = [make_piece(fid, scene.layouts[fid]) for fid in usable]
     order, rotations = true_assembly(scene.truth, scene.layouts, usable)
@@ -116,6 +118,20 @@ def anatomy_of(scene: CachedScene, params: PipelineParams) -> Anatomy:
     else:
         cause = "ranking"
     return _with(base, cause, gap, terms)
+
+
+def _chains_right_in_plan(result: dict[str, Any], truth: dict[str, Any]) -> bool:
+    """Every fragment's chain within 5 % of its diagonal of the truth, both seen along the
+    fragment's true up axis."""
+    estimated = {f["id"]: f["local_layout"]["keypoints"] for f in result["fragments"]}
+    for fragment in truth["fragments"]:
+        up = np.asarray(fragment["pose"], dtype=np.float64)[2, :3]  # world z in local axes
+        flat = np.eye(3) - np.outer(up, up)
+        est = np.asarray(estimated.get(fragment["id"], []), dtype=np.float64).reshape(-1, 3)
+        true = np.asarray(fragment["keypoints_local"], dtype=np.float64)
+        if keypoint_error(est @ flat, true @ flat) >= 0.05 * float(fragment["diagonal"]):
+            return False
+    return True
 
 
 def _with(

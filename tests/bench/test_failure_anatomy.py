@@ -78,3 +78,14 @@ def test_the_tables_count_causes_per_bucket() -> None:
     assert small[-1] == "1.00"
     terms = next(line for line in lines if "test_real 4-5" in line and "%" in line)
     assert "+1.00 (100%)" in terms and "-0.50 (0%)" in terms
+
+
+def test_a_floor_height_off_is_not_blamed_on_the_layout() -> None:
+    # Every chain right on the floor plan, one floor 0.5 m off: the hull still decides.
+    scene = _scene("paper", 1)
+    fid = sorted(scene.layouts)[1]
+    layout = scene.layouts[fid]
+    lowered = dataclasses.replace(layout.frame, floor_z=layout.frame.floor_z - 0.5)
+    layouts = {**scene.layouts, fid: dataclasses.replace(layout, frame=lowered)}
+    anatomy = anatomy_of(dataclasses.replace(scene, layouts=layouts), _with(weight_hull=30.0))
+    assert anatomy.cause == "energy"
