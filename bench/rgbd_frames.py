@@ -12,6 +12,7 @@ to a busy machine).
 
     .venv/bin/python bench/rgbd_frames.py [--scenes 20] [--seed 1000] [--shapes]
     .venv/bin/python bench/rgbd_frames.py --fit --scenes 540 --seed 2000 --shapes
+    .venv/bin/python bench/rgbd_frames.py --anatomy [--scenes 100] [--shapes]
 
 ``--shapes`` also runs rooms of real shapes (the MatterportLayout outlines of
 ``../shared/data``: the test split's for held-out seeds, the tune split's for tune seeds)
@@ -23,6 +24,11 @@ regression of each main room's right/wrong on its logit (:func:`bench.scoring.ma
 use tune seeds (2000 and up: 1000-1999 are held out) and, with ``--shapes``, the shapes'
 tune split. The two runs share the machine's two cores. It prints the map and what it does
 to those rooms at the closing threshold.
+
+``--anatomy`` tells what limits the frames instead: each frame laid out on its own (no
+merging), every scene's placement is classed by :func:`bench.tune_placement.limit_of`:
+ranked first, energy (a right room found but ranked lower), search, or chains (no right room
+can be built from these chains).
 """
 
 from __future__ import annotations
@@ -32,6 +38,7 @@ import math
 import statistics
 import sys
 import time
+from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,10 +55,14 @@ from bench.scoring import (  # noqa: E402
     main_room_verdict,
     params_with,
 )
+from bench.tune_placement import LIMITS, limit_of, scene_candidates  # noqa: E402
+from bench.world_scenes import CachedScene  # noqa: E402
 from schemas.params import PipelineParams  # noqa: E402
 from services.evaluation import evaluate_result  # noqa: E402
+from services.fragments import fragment_layout  # noqa: E402
 from services.pipeline import align_fragments  # noqa: E402
 from services.synthetic.render import (  # noqa: E402
+    FrameScene,
     FrameSpec,
     frame_ground_truth_json,
     generate_frame_scene,
@@ -77,6 +88,19 @@ class LayoutClock:
         self.started = now if stage.startswith("local layout") else None
 
 
+def _scenes(
+    n_scenes: int, first_seed: int, outlines: list[FloatArray] | None
+) -> Iterator[FrameScene | None]:
+    """The frame scenes of seeds ``first_seed`` on (rooms of ``outlines`` in turn, if any);
+    None for a room no station tiles within the camera's range."""
+    for k in range(n_scenes):
+        outline = outlines[k % len(outlines)] if outlines else None
+        try:
+            yield generate_frame_scene(FrameSpec(), first_seed + k, outline)
+        except RuntimeError:
+            yield None
+
+
 def run(
     n_scenes: int,
     first_seed: int,
@@ -85,19 +109,14 @@ def run(
 ) -> dict[str, Any]:
     """Local and global figures over ``n_scenes`` frame scenes from ``first_seed``;
     ``"confidences"`` and ``"right"`` list each main room's confidence and verdict."""
-    spec = FrameSpec()
     local, global_ok, rotation, translation, frames, statuses = [], [], [], [], [], []
     confidences: list[float] = []
     right: list[bool] = []
     clock = LayoutClock()
     skipped = 0
-    for k in range(n_scenes):
-        seed = first_seed + k
-        outline = outlines[k % len(outlines)] if outlines else None
-        try:
-            scene = generate_frame_scene(spec, seed, outline)
-        except RuntimeError:
-            skipped += 1  # no station tiles this room within range
+    for scene in _scenes(n_scenes, first_seed, outlines):
+        if scene is None:
+            skipped += 1
             continue
         aligned = align_fragments({f.id: f.frame for f in scene.frames}, params, clock)
         result = aligned.result.model_dump(mode="json")
@@ -164,11 +183,15 @@ def main() -> None:
     )
     parser.add_argument("--shapes", action="store_true", help="also real room shapes")
     parser.add_argument("--fit", action="store_true", help="fit the frames' calibration")
+    parser.add_argument("--anatomy", action="store_true", help="what limits each scene")
     add_params_option(parser)
     args = parser.parse_args()
     params = params_with(args.set)
     if args.fit:
         _fit(args.scenes, args.seed, args.shapes, params)
+        return
+    if args.anatomy:
+        _anatomy(args.scenes, args.seed, args.shapes, params)
         return
     print(
         "| rooms | scenes | frames | ACC_local % | ACC_global % | rotation deg | "
@@ -212,6 +235,41 @@ def _fit(n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams) -
     right = [ok for r in runs for ok in r["right"]]
     coefficients, summary = fit_logit_map(confidences, right, params.placement.closed_confidence)
     print(f"frame_calibration = {coefficients}: {summary}")
+
+
+def limits(
+    n_scenes: int,
+    first_seed: int,
+    outlines: list[FloatArray] | None = None,
+    params: PipelineParams = PipelineParams(),
+) -> dict[int, str]:
+    """Seed -> what limits that frame scene (:func:`bench.tune_placement.limit_of`); rooms no
+    station tiles are left out."""
+    out = {}
+    for scene in _scenes(n_scenes, first_seed, outlines):
+        if scene is not None:
+            layouts = {f.id: fragment_layout(f.frame, params) for f in scene.frames}
+            truth = frame_ground_truth_json(scene)
+            cached = CachedScene(f"frames-{scene.seed}", truth, layouts, 0.0)
+            out[scene.seed] = limit_of(scene_candidates(cached, params.placement))
+    return out
+
+
+def _anatomy(n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams) -> None:
+    """Print how many scenes each limit decides, synthetic (and real shapes)."""
+    outlines = _outlines("tune" if first_seed >= 2000 else "test") if shapes else []
+    with ProcessPoolExecutor(2) as pool:
+        jobs = {"synthetic": pool.submit(limits, n_scenes, first_seed, None, params)}
+        if outlines:
+            jobs["MatterportLayout shapes"] = pool.submit(
+                limits, n_scenes, first_seed, outlines, params
+            )
+        runs = {name: job.result() for name, job in jobs.items()}
+    print("| rooms | scenes | " + " | ".join(LIMITS) + " |")
+    print("|---|---|" + "---|" * len(LIMITS))
+    for name, found in runs.items():
+        counts = [list(found.values()).count(limit) for limit in LIMITS]
+        print(f"| {name} | {len(found)} | " + " | ".join(str(c) for c in counts) + " |")
 
 
 if __name__ == "__main__":

@@ -48,7 +48,16 @@ from services.evaluation import evaluate_result
 from services.placement import PlacementCandidate, evaluate_placement, make_piece, place_pieces
 from services.placement.energy import FEATURES, feature_weights
 
-__all__ = ["SceneCandidates", "collect", "fit_calibration", "fit_weights", "main"]
+__all__ = [
+    "LIMITS",
+    "SceneCandidates",
+    "collect",
+    "fit_calibration",
+    "fit_weights",
+    "limit_of",
+    "main",
+    "scene_candidates",
+]
 
 FITTED = FEATURES[:-1]  # the hints' prior is already a negative log-likelihood
 _WEIGHT_FIELDS = (
@@ -74,7 +83,30 @@ class SceneCandidates:
     missed_truth_right: bool
 
 
-def _scene_candidates(scene: CachedScene, params: PlacementParams) -> SceneCandidates:
+LIMITS = ("ranked first", "energy", "search", "chains")
+
+
+def limit_of(scene: SceneCandidates) -> str:
+    """What decides a scene, from its assemblies: ``"ranked first"`` (the lowest energy is
+    right), ``"energy"`` (a right one was found but ranked lower), ``"search"`` (the true
+    assembly is right but was not found), ``"chains"`` (no right assembly exists with these
+    chains: the true one fails the 5 % test or does not close, or a chain is missing).
+
+    >>> import numpy as np
+    >>> none = np.zeros((0, 1))
+    >>> limit_of(SceneCandidates(3, none, np.array([False, True]), none, False, None, False))
+    'energy'
+    """
+    if len(scene.right) and scene.right[0]:
+        return "ranked first"
+    if scene.right.any():
+        return "energy"
+    return "search" if scene.missed_truth_right else "chains"
+
+
+def scene_candidates(scene: CachedScene, params: PlacementParams) -> SceneCandidates:
+    """Place one scene; score each closed assembly found and, when the search missed it,
+    the true one."""
     ids = [fid for fid, lay in scene.layouts.items() if lay.ok]
     pieces = [make_piece(fid, scene.layouts[fid]) for fid in ids]
     placement = place_pieces(pieces, params) if len(pieces) >= 2 else None
@@ -110,9 +142,9 @@ def collect(
     """Place every scene and score each assembly the search returns (``workers``
     processes)."""
     if workers <= 1:
-        return [_scene_candidates(scene, params) for scene in scenes]
+        return [scene_candidates(scene, params) for scene in scenes]
     with ProcessPoolExecutor(workers) as pool:
-        return list(pool.map(_scene_candidates, scenes, [params] * len(scenes), chunksize=4))
+        return list(pool.map(scene_candidates, scenes, [params] * len(scenes), chunksize=4))
 
 
 def save_candidates(data: list[SceneCandidates], path: Path) -> None:

@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from bench.rgbd_frames import LayoutClock, _row, run
+from bench.rgbd_frames import LayoutClock, _row, limits, run
+from bench.tune_placement import LIMITS
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -37,3 +38,9 @@ def test_a_room_no_station_can_tile_is_counted_as_not_rendered() -> None:
     figures = run(1, 1000, [hall])
     assert figures["scenes"] == 0 and figures["skipped"] == 1
     assert _row("hall", figures).startswith("| hall | 0 (1 not rendered) | 0 |")
+
+
+def test_every_rendered_scene_gets_one_limit() -> None:
+    found = limits(2, 1000)
+    assert sorted(found) == [1000, 1001]
+    assert set(found.values()) <= set(LIMITS)

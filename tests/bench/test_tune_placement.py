@@ -8,7 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.tune_placement import FITTED, SceneCandidates, load_candidates, save_candidates
+from bench.tune_placement import (
+    FITTED,
+    SceneCandidates,
+    limit_of,
+    load_candidates,
+    save_candidates,
+)
 
 
 def _scene(missed: bool) -> SceneCandidates:
@@ -49,3 +55,28 @@ def test_assemblies_saved_with_other_features_are_refused(tmp_path: Path) -> Non
     path.write_text(json.dumps(record))
     with pytest.raises(ValueError, match="features"):
         load_candidates(path)
+
+
+@pytest.mark.parametrize(
+    ("right", "missed_right", "limit"),
+    [
+        ([True, False], False, "ranked first"),
+        ([False, True], False, "energy"),
+        ([False, False], True, "search"),
+        ([False, False], False, "chains"),
+        ([], False, "chains"),
+    ],
+)
+def test_a_scene_is_limited_by_the_first_stage_that_loses_the_right_room(
+    right: list[bool], missed_right: bool, limit: str
+) -> None:
+    scene = SceneCandidates(
+        4,
+        np.zeros((len(right), len(FITTED))),
+        np.array(right, dtype=bool),
+        np.zeros(len(right), dtype=int),
+        False,
+        np.zeros(len(FITTED)) if missed_right else None,
+        missed_right,
+    )
+    assert limit_of(scene) == limit
