@@ -89,6 +89,12 @@ class FrameParams(BaseModel):
         0.05, gt=0, description="3D distance under which a match agrees with the fit, m"
     )
     ransac_iterations: int = Field(400, ge=10, description="rigid-fit RANSAC iterations")
+    corner_price: float = Field(
+        0.2,
+        ge=0,
+        description="covered wall a corner must add to a frame's chain to be worth it, m "
+        "(a cloud's chain: 0.3; a frame sees a corner's walls shorter, at its view's edges)",
+    )
 
     @model_validator(mode="after")
     def _range(self) -> FrameParams:

@@ -26,7 +26,7 @@ __all__ = ["WallChain", "find_wall_chain"]
 _CORNER_REACH = 3.0  # m, how far past a segment's end a deduced corner may lie
 _OCCLUSION_REACH = 3.0  # m, longest gap the ST-graph links across on one line
 _MAX_OPEN_GAP = 0.5  # m, longest stretch a wall may run with nothing scanned beside it
-_CORNER_METERS = 0.3  # covered wall a corner must add to be worth it, m
+_CORNER_METERS = 0.3  # covered wall a corner must add to a cloud's chain to be worth it, m
 _COST_METERS = 0.1  # tie-break: meters of covered wall per unit of path cost
 _SNAP_CELLS = 2.0  # a segment end this close to a deduced corner is merged into it
 _END_MATCH = 0.05  # m, a line this close to a chain's end wall is that wall's line
@@ -208,7 +208,11 @@ def _forest_path(we: csr_matrix, st: csr_matrix) -> tuple[list[int], float] | No
 
 
 def _best_path(
-    we: csr_matrix, cover: FloatArray, unseen: FloatArray, points: FloatArray
+    we: csr_matrix,
+    cover: FloatArray,
+    unseen: FloatArray,
+    points: FloatArray,
+    corner_price: float = _CORNER_METERS,
 ) -> tuple[list[int], float] | None:
     """The directed simple path that explains the most wall (:func:`_most_wall_path`).
 
@@ -219,22 +223,22 @@ def _best_path(
     chain then opens in front of a cabinet, or short of a corner. So when edges bridge
     ``_MIN_UNSEEN`` or more of unseen wall, the search runs again without them, and the path
     explaining the most wall of the two wins (the same score: the chain is never worse by
-    it).
+    it). corner_price: covered wall a corner must add, m.
     """
-    found = _most_wall_path(we, cover, points)
+    found = _most_wall_path(we, cover, points, corner_price)
     coo = we.tocoo()
     bridges = unseen[coo.row, coo.col] >= _MIN_UNSEEN
     if found is None or not bridges.any():
         return None if found is None else (found[0], found[1])
     keep = ~bridges
     unbridged = csr_matrix((coo.data[keep], (coo.row[keep], coo.col[keep])), shape=we.shape)
-    other = _most_wall_path(unbridged, cover, points)
+    other = _most_wall_path(unbridged, cover, points, corner_price)
     best = other if other is not None and other[2] > found[2] + 1e-9 else found
     return best[0], best[1]
 
 
 def _most_wall_path(
-    we: csr_matrix, cover: FloatArray, points: FloatArray
+    we: csr_matrix, cover: FloatArray, points: FloatArray, corner_price: float = _CORNER_METERS
 ) -> tuple[list[int], float, float] | None:
     """The directed simple path that explains the most wall: (nodes, paper's cost, score).
 
@@ -290,7 +294,7 @@ def _most_wall_path(
         options = np.zeros((len(u), 3))
         for arrival in (0, 1):
             tail_state = 2 * u + arrival
-            extend = value[tail_state] - _CORNER_METERS * (axis != arrival)
+            extend = value[tail_state] - corner_price * (axis != arrival)
             blocked = (on_path[tail_state] & beyond_tail).any(axis=1)
             options[:, arrival + 1] = np.where(blocked, -np.inf, extend)
         choice = np.argmax(options, axis=1)
@@ -391,13 +395,14 @@ def find_wall_chain(
     we, st, cover, unseen = _edges(lines, nodes, params.complexity_penalty)
     node_points = np.asarray(nodes.points)
     found = _frustum_path(we, node_points, views) if views else None
+    corner_price = params.frame.corner_price if views else _CORNER_METERS
     if found is not None:
-        best = _best_path(we, cover, unseen, node_points)
+        best = _best_path(we, cover, unseen, node_points, corner_price)
         found = _closer_to_the_walls(found, best, cover, node_points)
     if found is None and params.source_target == "spanning_forest":
         found = _forest_path(we, st)
     elif found is None:
-        found = _best_path(we, cover, unseen, node_points)
+        found = _best_path(we, cover, unseen, node_points, corner_price)
     if found is None:
         return None
     order, cost = found

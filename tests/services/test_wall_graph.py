@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from schemas.params import LayoutParams
-from services.wall_graph import find_wall_chain
+from services.wall_graph import (
+    _best_path,
+    _build_nodes,
+    _corners_only,
+    _edges,
+    find_wall_chain,
+)
 from services.wall_lines import WallLine
 
 pytestmark = pytest.mark.timeout(60)
@@ -226,3 +232,16 @@ def test_a_chain_opens_at_the_unseen_stretch_however_many_edges_bridge_it(split)
     assert np.allclose(chain.keypoints[0], [2.5, 4.0], atol=0.1)
     assert np.allclose(chain.keypoints[-1], [4.0, 4.0], atol=0.1)
     assert len(chain.keypoints) == 6  # once around, no wall run twice
+
+
+@pytest.mark.parametrize(("price", "corners"), [(0.3, 0), (0.2, 1)])
+def test_a_corner_is_taken_when_its_wall_pays_its_price(price: float, corners: int) -> None:
+    # 3 m of wall along x, then a turn onto 0.25 m of wall along y: the turn adds less wall
+    # than a cloud's price for a corner (0.3 m) and more than a frame's (0.2 m).
+    lines = [_line(0, 0.0, 1, [(0.0, 3.0)]), _line(1, 3.0, 1, [(0.0, 0.25)])]
+    nodes = _build_nodes(lines)
+    we, _, cover, unseen = _edges(lines, nodes, LayoutParams().complexity_penalty)
+    found = _best_path(we, cover, unseen, np.asarray(nodes.points), price)
+    assert found is not None
+    keypoints = _corners_only(np.array([nodes.points[i] for i in found[0]]))
+    assert len(keypoints) - 2 == corners
