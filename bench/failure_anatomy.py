@@ -47,7 +47,7 @@ from bench.world_scenes import (
     scene_jobs,
 )
 from schemas.params import PipelineParams
-from services.evaluation import evaluate_result, keypoint_error
+from services.evaluation import evaluate_result, local_layout_correct
 from services.pipeline import place_site
 from services.placement import evaluate_placement, make_piece
 from services.placement.energy import FEATURES, feature_weights
@@ -129,7 +129,7 @@ def _chains_right_in_plan(result: dict[str, Any], truth: dict[str, Any]) -> bool
         flat = np.eye(3) - np.outer(up, up)
         est = np.asarray(estimated.get(fragment["id"], []), dtype=np.float64).reshape(-1, 3)
         true = np.asarray(fragment["keypoints_local"], dtype=np.float64)
-        if keypoint_error(est @ flat, true @ flat) >= 0.05 * float(fragment["diagonal"]):
+        if not local_layout_correct(est @ flat, true @ flat, float(fragment["diagonal"])):
             return False
     return True
 

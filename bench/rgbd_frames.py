@@ -38,11 +38,11 @@ import math
 import statistics
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -220,19 +220,35 @@ def _outlines(split: str) -> list[FloatArray]:
     return [p for h, p in shapes if h in chosen and float(np.ptp(p, axis=0).max()) <= 9.0]
 
 
+Result = TypeVar("Result")
+
+
+def _side_by_side(
+    measure: Callable[[int, int, list[FloatArray] | None, PipelineParams], Result],
+    n_scenes: int,
+    first_seed: int,
+    outlines: list[FloatArray],
+    params: PipelineParams,
+) -> dict[str, Result]:
+    """``measure`` of the synthetic rooms and, when there are ``outlines``, of the real
+    shapes, in two processes (the machine's two cores)."""
+    with ProcessPoolExecutor(2) as pool:
+        jobs = {"synthetic": pool.submit(measure, n_scenes, first_seed, None, params)}
+        if outlines:
+            jobs["MatterportLayout shapes"] = pool.submit(
+                measure, n_scenes, first_seed, outlines, params
+            )
+        return {name: job.result() for name, job in jobs.items()}
+
+
 def _fit(n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams) -> None:
     """Fit and print the frames' calibration on synthetic (and tune-split shaped) rooms."""
     off = params.model_copy(
         update={"placement": params.placement.model_copy(update={"frame_calibration": (0, 1)})}
     )
-    outlines = _outlines("tune") if shapes else []
-    with ProcessPoolExecutor(2) as pool:
-        jobs = [pool.submit(run, n_scenes, first_seed, None, off)]
-        if outlines:
-            jobs.append(pool.submit(run, n_scenes, first_seed, outlines, off))
-        runs = [job.result() for job in jobs]
-    confidences = [c for r in runs for c in r["confidences"]]
-    right = [ok for r in runs for ok in r["right"]]
+    runs = _side_by_side(run, n_scenes, first_seed, _outlines("tune") if shapes else [], off)
+    confidences = [c for r in runs.values() for c in r["confidences"]]
+    right = [ok for r in runs.values() for ok in r["right"]]
     coefficients, summary = fit_logit_map(confidences, right, params.placement.closed_confidence)
     print(f"frame_calibration = {coefficients}: {summary}")
 
@@ -258,13 +274,7 @@ def limits(
 def _anatomy(n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams) -> None:
     """Print how many scenes each limit decides, synthetic (and real shapes)."""
     outlines = _outlines("tune" if first_seed >= 2000 else "test") if shapes else []
-    with ProcessPoolExecutor(2) as pool:
-        jobs = {"synthetic": pool.submit(limits, n_scenes, first_seed, None, params)}
-        if outlines:
-            jobs["MatterportLayout shapes"] = pool.submit(
-                limits, n_scenes, first_seed, outlines, params
-            )
-        runs = {name: job.result() for name, job in jobs.items()}
+    runs = _side_by_side(limits, n_scenes, first_seed, outlines, params)
     print("| rooms | scenes | " + " | ".join(LIMITS) + " |")
     print("|---|---|" + "---|" * len(LIMITS))
     for name, found in runs.items():

@@ -212,7 +212,7 @@ def _best_path(
     cover: FloatArray,
     unseen: FloatArray,
     points: FloatArray,
-    corner_price: float = _CORNER_METERS,
+    corner_price: float,
 ) -> tuple[list[int], float] | None:
     """The directed simple path that explains the most wall (:func:`_most_wall_path`).
 
@@ -238,7 +238,7 @@ def _best_path(
 
 
 def _most_wall_path(
-    we: csr_matrix, cover: FloatArray, points: FloatArray, corner_price: float = _CORNER_METERS
+    we: csr_matrix, cover: FloatArray, points: FloatArray, corner_price: float
 ) -> tuple[list[int], float, float] | None:
     """The directed simple path that explains the most wall: (nodes, paper's cost, score).
 
