@@ -397,9 +397,25 @@ def _check_walls(
     placement = params.placement
     if sum(meters.values()) < placement.unexplained_wall_limit - 1e-9:
         return main, {}
-    sure = min(main.assembly.probability, placement.unexplained_wall_confidence)
-    doubted = dataclasses.replace(main.assembly, probability=sure)
-    return dataclasses.replace(main, assembly=doubted), {k: round(v, 2) for k, v in meters.items()}
+    capped = _capped(main, placement.unexplained_wall_confidence)
+    return capped, {k: round(v, 2) for k, v in meters.items()}
+
+
+def _check_refinement(main: _Placed, params: PipelineParams) -> _Placed:
+    """The main room with its confidence capped when its refinement had to drop the
+    junction inequalities: the walls the scans measured do not fit this loop (overlaps
+    longer than the walls, pieces pushed through each other), a sign of a wrong assembly
+    however likely its energy made it."""
+    if main.assembly is None or not main.refinement.status.startswith("relaxed"):
+        return main
+    return _capped(main, params.placement.relaxed_refinement_confidence)
+
+
+def _capped(main: _Placed, most: float) -> _Placed:
+    """The main room with its probability at most ``most``."""
+    assert main.assembly is not None
+    sure = min(main.assembly.probability, most)
+    return dataclasses.replace(main, assembly=dataclasses.replace(main.assembly, probability=sure))
 
 
 _SLIDE_SIGMAS = 2.0  # how far a slid runner-up moves, in the slide's standard deviations
@@ -531,7 +547,7 @@ def place_site(
     report("refinement", 0.7)
     sigmas = _trusted_sigmas(site_hints, placement, pieces, params)
     main, alternatives, assemblies = _choose(layouts, pieces, placement, params, site_hints, sigmas)
-    main, unexplained = _check_walls(main, layouts, params)
+    main, unexplained = _check_walls(_check_refinement(main, params), layouts, params)
     slid = 0
     doubted = main.assembly is not None and (
         main.assembly.probability < params.placement.closed_confidence

@@ -619,3 +619,21 @@ def test_walls_on_the_floorplan_or_beyond_it_leave_the_room_closed():
     result = place_site(_room_of_two(np.vstack([on_wall, beyond])))
     assert result.status == "closed"
     assert "unexplained_walls" not in result.diagnostics
+
+
+def test_a_room_whose_walls_do_not_fit_its_loop_is_not_said_closed():
+    # A corridor (U, with 0.3 m of the hall's wall past its mouth) and a hall whose chain
+    # runs on over the corridor's mouth: the likeliest assembly puts the corridor flush with
+    # the hall's far wall, where the measured walls overrun each other. Its refinement has
+    # to drop the junction inequalities: a wrong room, however likely its energy says.
+    frame = ManhattanFrame(rotation=np.eye(3), floor_z=0.0, ceiling_z=2.5)
+    corridor = np.array([[0.0, 0.0], [5.7, 0.0], [5.7, 1.25], [0.0, 1.25], [0.0, 1.57]])
+    hall = np.array([[0.0, 0.0], [6.45, 0.0], [6.45, 6.03], [0.0, 6.03], [0.0, 0.73]])
+    layouts = {
+        "corridor": LocalLayout(keypoints=corridor, frame=frame),
+        "hall": LocalLayout(keypoints=hall, frame=frame),
+    }
+    result = place_site(layouts)
+    assert result.diagnostics["refinement"]["status"].startswith("relaxed")
+    assert result.status != "closed"
+    assert result.confidence <= PipelineParams().placement.relaxed_refinement_confidence
