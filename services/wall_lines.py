@@ -281,13 +281,65 @@ def _make_grid(xy: FloatArray, cell: float, counted: NDArray[np.bool_]) -> _Grid
     return _Grid(origin=origin, cell=cell, occupancy=occupancy)
 
 
+_HORIZON_BIN = float(np.radians(1.0))  # bearing bins of a camera's occlusion horizon
+_OCCLUDER_GAP = 0.3  # m, points this close in front of a wall column do not hide it
+_KEY_SPAN = 1000.0  # m, longer than any distance: a bin's sort keys never reach the next's
+
+
+@dataclass(frozen=True)
+class _Horizon:
+    """What stands between one camera and the walls (aligned frame).
+
+    Furniture stands on the floor, so a cabinet hides the wall behind it from the floor up
+    to where the camera's rays pass over its top. Per bearing bin the occluding points are
+    sorted by distance with the highest elevation angle seen so far, so the lowest height
+    of a wall column the camera saw over nearer things is one lookup.
+
+    keys: (M,) bearing bin * ``_KEY_SPAN`` + distance, sorted; elevation: (M,) the highest
+    elevation angle (radians, from the camera) up to each point within its bin.
+    """
+
+    centre: FloatArray
+    keys: FloatArray
+    elevation: FloatArray
+
+    @classmethod
+    def of(cls, centre: FloatArray, points: FloatArray) -> _Horizon:
+        """The horizon of the standing points (M, 3) seen from ``centre`` (3,)."""
+        offset = points[:, :2] - centre[:2]
+        distance = np.hypot(offset[:, 0], offset[:, 1])
+        near = distance > _OCCLUDER_GAP  # the camera's own surroundings hide nothing here
+        bins = np.floor(np.arctan2(offset[near, 1], offset[near, 0]) / _HORIZON_BIN)
+        elevation = np.arctan2(points[near, 2] - centre[2], distance[near])
+        keys = bins * _KEY_SPAN + distance[near]
+        order = np.argsort(keys, kind="stable")
+        # A running max that restarts in every bin: each bin is lifted above the one before
+        # (elevations span less than 4 radians).
+        lift = 4.0 * (bins[order] - (bins.min() if len(bins) else 0.0))
+        running = np.maximum.accumulate(elevation[order] + lift) - lift
+        return cls(centre, keys[order], running)
+
+    def lowest_seen(self, xy: FloatArray) -> FloatArray:
+        """(C,) the lowest height at which the camera saw past nearer standing points to
+        each column ``xy`` (C, 2); -inf where nothing stands in front of it."""
+        offset = xy - self.centre[:2]
+        distance = np.hypot(offset[:, 0], offset[:, 1])
+        start = np.floor(np.arctan2(offset[:, 1], offset[:, 0]) / _HORIZON_BIN) * _KEY_SPAN
+        first = np.searchsorted(self.keys, start)
+        last = np.searchsorted(self.keys, start + np.maximum(distance - _OCCLUDER_GAP, 0.0))
+        angle = self.elevation[np.maximum(last - 1, 0)] if len(self.keys) else np.zeros(len(xy))
+        return np.where(last > first, self.centre[2] + np.tan(angle) * distance, -np.inf)
+
+
 @dataclass(frozen=True)
 class _TallRule:
     """When a cell's column counts as standing wall: N height bins, reaching the top part
     of the floor-to-ceiling band (furniture stops lower; walls reach the ceiling).
 
     With camera views (an RGB-D frame), both are measured against the part of the column
-    the cameras saw: a wall near the camera shows only its lower part.
+    the cameras saw: a wall near the camera shows only its lower part, and a wall behind a
+    cabinet only its part over the cabinet (``horizon``, one camera), which need hold only
+    half its height in bins (at least 3).
     """
 
     n: int
@@ -295,6 +347,7 @@ class _TallRule:
     top_bin: int
     top_z: float = np.inf
     views: tuple[CameraView, ...] = ()
+    horizon: _Horizon | None = None
 
     def per_cell(self, xy: FloatArray, cell: float) -> tuple[FloatArray, FloatArray]:
         """(C,) least height bins and (C,) least top bin of the columns at ``xy`` (C, 2)."""
@@ -305,9 +358,13 @@ class _TallRule:
         low, high = visible_band(self.views, xy)
         seen = ~np.isnan(high)
         high = np.minimum(high[seen], self.top_z)
-        visible = high - np.maximum(low[seen], self.floor_z + 0.1)
-        # A column seen over less than half a meter cannot tell a wall from furniture.
-        n[seen] = np.where(visible < _MIN_VISIBLE, np.inf, np.clip(0.5 * visible / cell, 3, self.n))
+        low = np.maximum(low[seen], self.floor_z + 0.1)
+        visible = high - low
+        if self.horizon is not None:
+            low = np.maximum(low, self.horizon.lowest_seen(xy[seen]))
+        # A column in view over less than half a meter cannot tell a wall from furniture.
+        least = np.clip(0.5 * (high - low) / cell, 3, self.n)
+        n[seen] = np.where(visible < _MIN_VISIBLE, np.inf, least)
         top[seen] = np.minimum(top[seen], np.floor((high - self.floor_z - 0.25) / cell))
         return n, top
 
@@ -529,6 +586,8 @@ def find_wall_lines(
         top_bin=int((0.1 + _TOP_REACH * band) / params.cell_size),
         top_z=top,
         views=tuple(views),
+        # One camera: what stands in front of a wall hides its foot (many cameras: none).
+        horizon=_Horizon.of(views[0].centre, aligned[in_band]) if len(views) == 1 else None,
     )
     lines: list[WallLine] = []
     flat_xy = aligned[horizontal, :2]

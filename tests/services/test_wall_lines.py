@@ -7,12 +7,15 @@ import dataclasses
 import numpy as np
 import pytest
 
+from schemas.frames import IntrinsicsModel
 from schemas.params import LayoutParams
+from services.frustum import CameraView
 from services.pipeline import estimate_layout
 from services.synthetic import SceneSpec, generate_scene
 from services.wall_lines import (
     WallLine,
     _doors_closed,
+    _Horizon,
     _runs,
     _shadowed,
     evidence_threshold,
@@ -276,3 +279,48 @@ def test_high_cells_are_the_centres_of_runs_long_enough_to_be_walls() -> None:
     assert len(along_x.high_cells(min_cells=2)) == 6
     deduced = dataclasses.replace(along_x, virtual=True)
     assert deduced.high_cells(min_cells=3).shape == (0, 2)
+
+
+def _seen_over_a_cabinet(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """What a level camera at the origin (1.2 m over the floor, looking along +y) sees of a
+    2.8 m tall wall at y = 4 with a 2 m tall cabinet at y = 3 in front of its middle: the
+    cabinet's front, and of the wall behind it only the strip over the cabinet's top
+    (z > 1.07, 0.5 m)."""
+    parts, normals = [], []
+
+    def add(points: np.ndarray, normal: tuple[float, float, float]) -> None:
+        parts.append(points)
+        normals.append(np.tile(normal, (len(points), 1)))
+
+    x, z = rng.uniform(-1.5, 1.5, 8000), rng.uniform(-1.2, 1.6, 8000)
+    over = (np.abs(x) > 0.6) | (z > 0.8 * 4.0 / 3.0)
+    add(np.column_stack([x[over], np.full(over.sum(), 4.0), z[over]]), (0.0, -1.0, 0.0))
+    x, z = rng.uniform(-0.6, 0.6, 2000), rng.uniform(-1.2, 0.8, 2000)
+    add(np.column_stack([x, np.full_like(x, 3.0), z]), (0.0, -1.0, 0.0))
+    x, y = rng.uniform(-1.5, 1.5, 6000), rng.uniform(1.5, 4.0, 6000)
+    floor = ~((np.abs(x) < 0.6) & (y > 3.0))
+    add(np.column_stack([x[floor], y[floor], np.full(floor.sum(), -1.2)]), (0.0, 0.0, 1.0))
+    return np.vstack(parts), np.vstack(normals)
+
+
+def test_a_wall_seen_only_over_a_cabinet_in_front_of_it_is_still_a_wall() -> None:
+    points, normals = _seen_over_a_cabinet(np.random.default_rng(5))
+    kinect = IntrinsicsModel(width=640, height=480, fx=525, fy=525, cx=319.5, cy=239.5)
+    optical_to_aligned = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])
+    view = CameraView.from_intrinsics(kinect, optical_to_aligned, np.zeros(3))
+    lines = find_wall_lines(points, normals, -1.2, None, LayoutParams(), [view])
+    back = [ln for ln in lines if ln.axis == 0 and abs(ln.offset - 4.0) < 0.05 and not ln.virtual]
+    assert back, "the wall behind the cabinet is found"
+    spans = back[0].segments
+    # One wall across the cabinet, not two pieces either side of it.
+    assert len(spans) == 1
+    assert spans[0, 0] < -1.3 and spans[0, 1] > 1.3
+
+
+def test_the_horizon_is_where_the_camera_sees_over_nearer_things() -> None:
+    cabinet = np.column_stack([np.zeros(5), np.full(5, 3.0), np.linspace(-1.2, 0.8, 5)])
+    horizon = _Horizon.of(np.zeros(3), cabinet)
+    seen = horizon.lowest_seen(np.array([[0.0, 4.0], [2.0, 4.0], [0.0, 3.2]]))
+    assert seen[0] == pytest.approx(0.8 * 4.0 / 3.0)  # over the cabinet's top
+    assert seen[1] == -np.inf  # nothing stands on that bearing
+    assert seen[2] == -np.inf  # the cabinet stands against that column: it is no occluder
