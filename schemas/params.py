@@ -202,15 +202,15 @@ class PlacementParams(_Frozen):
         2_000, ge=1, description="search nodes of the fallback search for an open chain"
     )
     unexplored_energy: float = Field(
-        4.271,
+        4.594,
         description="energy above the best of the 'none of these' alternative (local layouts "
         "wrong, truth not found) in the confidence",
     )
     unexplored_per_piece: float = Field(
-        -0.53, description="change of that energy per piece (more pieces, more to go wrong)"
+        -0.376, description="change of that energy per piece (more pieces, more to go wrong)"
     )
     confidence_coefficients: tuple[float, ...] = Field(
-        (1.402, 1.636, 0.153, -0.041, -0.437, -0.701, 1.016),
+        (1.993, 1.115, -0.014, -0.321, -0.562, -0.222, 0.661),
         min_length=7,
         max_length=7,
         description="logistic calibration of the main room's probability over "
@@ -218,14 +218,14 @@ class PlacementParams(_Frozen):
         "conflict, its hidden corners, search truncated); (0, 1, 0, ...) is the share itself",
     )
     frame_calibration: tuple[float, float] = Field(
-        (-1.059, 0.704),
+        (-0.918, 0.896),
         description="(bias, slope) mapping the main room's calibrated logit z to a + b z when "
         "its pieces are RGB-D frames (a share of the pieces: that share of the change): a "
         "frame's chain is wrong more often than a cloud's (bench/rgbd_frames.py --fit, tune "
         "seeds); (0, 1) leaves frames as clouds",
     )
     thin_cloud_calibration: tuple[float, float] = Field(
-        (-0.682, 0.677),
+        (-1.103, 1.025),
         description="the same map for clouds thinner than layout.min_calibrated_points "
         "(bench/sensor_stress.py --fit, tune seeds)",
     )
@@ -268,7 +268,7 @@ class PlacementParams(_Frozen):
         "them had been said closed",
     )
     closed_confidence: float = Field(
-        0.95,
+        0.98,
         gt=0,
         le=1,
         description="confidence at or above which a closed loop is reported 'closed'; below "

@@ -256,9 +256,7 @@ def _pair_evidence(
     for a, b in itertools.product(range(n), repeat=2):
         if a != b or n == 1:
             match = register_ends(targets[a], sources[b])
-            # Coinciding structure is strong evidence for a junction; structure without
-            # a counterpart is weak evidence against it (occlusion, clutter that moved).
-            structure[a, b] = min(0.0, match.score)
+            structure[a, b] = match.score
             boundary[a, b] = boundary_mismatch(pieces[a], pieces[b], params)
             if match.measured_shift is not None:
                 measured[pieces[a].id, pieces[b].id] = match.measured_shift

