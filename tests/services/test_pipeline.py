@@ -616,7 +616,7 @@ def test_a_room_that_misses_a_wall_its_scans_show_is_not_said_closed():
     assert result.diagnostics["unexplained_walls"] == {"most": pytest.approx(13 * 0.08)}
 
 
-def test_walls_on_the_floorplan_or_beyond_it_leave_the_room_closed():
+def test_walls_on_the_floorplan_or_beyond_it_leave_the_room_as_it_was():
     on_wall = np.column_stack([np.full(13, 9.9), 2.0 + 0.08 * np.arange(13)])
     beyond = np.column_stack([3.0 + 0.08 * np.arange(13), np.full(13, -1.5)])
     result = place_site(_room_of_two(np.vstack([on_wall, beyond])))
