@@ -95,7 +95,7 @@ def anatomy_of(scene: CachedScene, params: PipelineParams) -> Anatomy:
     energy = result["diagnostics"].get("energy")
     if energy is None:
         return _with(base, "search")
-    weights = dict(zip(FEATURES, feature_weights(params.placement), strict=True))
+    weights = dict(zip(FEATURES, feature_weights(params.placement, pieces), strict=True))
     terms = {
         name: weights[name] * (truth.features[name] - float(energy.get(name, 0.0)))
         for name in FEATURES

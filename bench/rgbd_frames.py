@@ -201,13 +201,13 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     print(_row("synthetic", run(args.scenes, args.seed, None, params)))
     # Tune seeds (2000 and up) draw the shapes' tune split, held-out seeds its test split.
-    outlines = _outlines("tune" if args.seed >= 2000 else "test") if args.shapes else []
+    outlines = frame_outlines("tune" if args.seed >= 2000 else "test") if args.shapes else []
     if outlines:
         print(_row("MatterportLayout shapes", run(args.scenes, args.seed, outlines, params)))
     print("paper (RGB-D and clouds): ACC_global 85.1 %, rotation 8.79 deg, translation 9.15 %")
 
 
-def _outlines(split: str) -> list[FloatArray]:
+def frame_outlines(split: str) -> list[FloatArray]:
     """Real room outlines of one split (``"tune"`` or ``"test"``) that a few stations see
     within the camera's range; none when the data file is missing."""
     from bench.room_shapes import DEFAULT_PATH, load_room_shapes, split_houses
@@ -246,11 +246,28 @@ def _fit(n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams) -
     off = params.model_copy(
         update={"placement": params.placement.model_copy(update={"frame_calibration": (0, 1)})}
     )
-    runs = _side_by_side(run, n_scenes, first_seed, _outlines("tune") if shapes else [], off)
+    runs = _side_by_side(run, n_scenes, first_seed, frame_outlines("tune") if shapes else [], off)
     confidences = [c for r in runs.values() for c in r["confidences"]]
     right = [ok for r in runs.values() for ok in r["right"]]
     coefficients, summary = fit_logit_map(confidences, right, params.placement.closed_confidence)
     print(f"frame_calibration = {coefficients}: {summary}")
+
+
+def cached_scenes(
+    n_scenes: int,
+    first_seed: int,
+    outlines: list[FloatArray] | None = None,
+    params: PipelineParams = PipelineParams(),
+) -> list[CachedScene]:
+    """The frame scenes of seeds ``first_seed`` on, each frame laid out on its own (no
+    merging), with their truth; rooms no station tiles are left out."""
+    out = []
+    for scene in _scenes(n_scenes, first_seed, outlines):
+        if scene is not None:
+            layouts = {f.id: fragment_layout(f.frame, params) for f in scene.frames}
+            truth = frame_ground_truth_json(scene)
+            out.append(CachedScene(f"frames-{scene.seed}", truth, layouts, 0.0))
+    return out
 
 
 def limits(
@@ -261,19 +278,15 @@ def limits(
 ) -> dict[int, str]:
     """Seed -> what limits that frame scene (:func:`bench.tune_placement.limit_of`); rooms no
     station tiles are left out."""
-    out = {}
-    for scene in _scenes(n_scenes, first_seed, outlines):
-        if scene is not None:
-            layouts = {f.id: fragment_layout(f.frame, params) for f in scene.frames}
-            truth = frame_ground_truth_json(scene)
-            cached = CachedScene(f"frames-{scene.seed}", truth, layouts, 0.0)
-            out[scene.seed] = limit_of(scene_candidates(cached, params.placement))
-    return out
+    return {
+        scene.seed: limit_of(scene_candidates(scene, params.placement))
+        for scene in cached_scenes(n_scenes, first_seed, outlines, params)
+    }
 
 
 def _anatomy(n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams) -> None:
     """Print how many scenes each limit decides, synthetic (and real shapes)."""
-    outlines = _outlines("tune" if first_seed >= 2000 else "test") if shapes else []
+    outlines = frame_outlines("tune" if first_seed >= 2000 else "test") if shapes else []
     runs = _side_by_side(limits, n_scenes, first_seed, outlines, params)
     print("| rooms | scenes | " + " | ".join(LIMITS) + " |")
     print("|---|---|" + "---|" * len(LIMITS))

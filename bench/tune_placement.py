@@ -15,7 +15,9 @@ returns is scored against the truth (right when its refined floorplan passes the
 
 Prints the fitted values as ``PlacementParams`` fields; copy them into
 ``schemas/params.py``. Run ``python -m bench.tune_placement`` (``--rounds 2`` refits with the
-first round's weights, as the search's candidates depend on them).
+first round's weights, as the search's candidates depend on them). ``--frames N`` fits the
+weights of RGB-D frame sites instead (``frame_weights``) on N rendered synthetic rooms and N
+rooms of the tune split's shapes (tune seeds from 2000), each frame laid out alone.
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ from bench.world_scenes import (
     load_set,
     scene_jobs,
 )
-from schemas.params import PlacementParams
+from schemas.params import PipelineParams, PlacementParams
 from services.confidence import CALIBRATION_FEATURES, calibration_features, same_room_groups
 from services.evaluation import evaluate_result
 from services.placement import PlacementCandidate, evaluate_placement, make_piece, place_pieces
@@ -66,6 +68,7 @@ _WEIGHT_FIELDS = (
 )  # fmt: skip
 assert len(_WEIGHT_FIELDS) == len(FITTED), "one weight field per fitted feature"
 _TARGET_RIGHT = 0.99
+_FRAME_SEED = 2000  # frame scenes: tune seeds (1000-1999 are held out)
 
 
 @dataclass(frozen=True)
@@ -311,8 +314,17 @@ def main(argv: list[str] | None = None) -> int:
         help="fit only the 'none of these' energy and the calibration: the energy's weights "
         "(and temperature) stay the current ones",
     )
+    parser.add_argument(
+        "--frames",
+        type=int,
+        default=0,
+        help="fit placement.frame_weights instead, on this many rendered RGB-D frame scenes of "
+        "tune seeds (2000 on), as many synthetic rooms as rooms of the tune split's shapes",
+    )
     args = parser.parse_args(argv)
     console = Console()
+    if args.frames:
+        return _fit_frame_weights(args.frames, args.rounds, console)
     scenes: list[CachedScene] = []
     if args.load is None:
         jobs = scene_jobs("tune", args.per_bucket, args.real, args.cache)
@@ -348,6 +360,37 @@ def main(argv: list[str] | None = None) -> int:
             f"{honest.mean():.3f}, Brier {np.mean((honest - right) ** 2):.3f}"
         )
         params = params.model_copy(update=fitted)
+    return 0
+
+
+def _fit_frame_weights(n_scenes: int, rounds: int, console: Console) -> int:
+    """Fit and print ``frame_weights`` on frame scenes (synthetic and tune-split shapes, in
+    two processes); the frames' calibration map is refitted after, with the new weights
+    (``bench/rgbd_frames.py --fit``)."""
+    from bench.rgbd_frames import cached_scenes, frame_outlines
+
+    pipeline = PipelineParams()
+    with ProcessPoolExecutor(2) as pool:
+        jobs = [
+            pool.submit(cached_scenes, n_scenes, _FRAME_SEED, outlines, pipeline)
+            for outlines in (None, frame_outlines("tune"))
+        ]
+        scenes = [scene for job in jobs for scene in job.result()]
+    console.log(f"{len(scenes)} frame scenes")
+    params = pipeline.placement
+    pooled: list[SceneCandidates] = []
+    for round_ in range(rounds):
+        data = collect(scenes, params, 2)
+        pooled = data if not pooled else [_pool(a, b) for a, b in zip(pooled, data, strict=True)]
+        ranked_first = sum(bool(len(s.right) and s.right[0]) for s in data)
+        w = fit_weights(pooled)
+        temperature = fit_calibration(data, w)[0]
+        fitted = tuple((w / temperature).round(3).tolist())
+        console.print(
+            f"round {round_ + 1}: frame_weights = {fitted} ({', '.join(_WEIGHT_FIELDS)}); "
+            f"right room ranked first with the weights before: {ranked_first} of {len(data)}"
+        )
+        params = params.model_copy(update={"frame_weights": fitted})
     return 0
 
 

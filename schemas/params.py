@@ -113,6 +113,15 @@ class PlacementParams(_Frozen):
     weight_outside: float = Field(
         2.5, ge=0, description="energy per m² of seen floor the closed room leaves outside"
     )
+    frame_weights: tuple[float, ...] | None = Field(
+        None,
+        min_length=7,
+        max_length=7,
+        description="the seven weights above (turn, hull, closure, structure, boundary, "
+        "conflict, outside) for pieces that are RGB-D frames, blended by the share of frame "
+        "pieces: a frame's few walls and sparse ends weigh the evidence differently from a "
+        "cloud's (python -m bench.tune_placement --frames); None weighs frames as clouds",
+    )
     outside_cap: float = Field(
         1.0,
         gt=0,

@@ -33,7 +33,7 @@ import numpy as np
 
 from schemas.params import PlacementParams
 from services.geometry import distance_to_polygon, points_in_polygon
-from services.placement.pieces import UNIT
+from services.placement.pieces import UNIT, Piece
 from services.types import FloatArray
 
 __all__ = [
@@ -81,20 +81,38 @@ class JunctionNoise:
         )
 
 
-def feature_weights(params: PlacementParams) -> FloatArray:
-    """(len(FEATURES),) weights of the energy's features; switched-off terms weigh 0."""
-    return np.array(
+def feature_weights(params: PlacementParams, pieces: Sequence[Piece] = ()) -> FloatArray:
+    """(len(FEATURES),) weights of the energy's features; switched-off terms weigh 0.
+
+    With ``params.frame_weights`` set, the weights move towards those by the share of
+    ``pieces`` that are RGB-D frames."""
+    weights = np.array(
         [
-            params.weight_turn * params.use_complexity,
-            params.weight_hull * params.use_complexity,
-            params.weight_closure * params.use_closure,
-            params.weight_structure * params.use_structure,
-            params.weight_boundary * params.use_boundary,
-            params.weight_conflict * params.use_free_space,
-            params.weight_outside * params.use_outside,
-            1.0,
+            params.weight_turn,
+            params.weight_hull,
+            params.weight_closure,
+            params.weight_structure,
+            params.weight_boundary,
+            params.weight_conflict,
+            params.weight_outside,
         ]
     )
+    if params.frame_weights is not None and pieces:
+        frame_share = sum(piece.evidence == "frame" for piece in pieces) / len(pieces)
+        weights = weights + frame_share * (np.asarray(params.frame_weights) - weights)
+    switches = np.array(
+        [
+            params.use_complexity,
+            params.use_complexity,
+            params.use_closure,
+            params.use_structure,
+            params.use_boundary,
+            params.use_free_space,
+            params.use_outside,
+        ],
+        dtype=np.float64,
+    )
+    return np.append(weights * switches, 1.0)
 
 
 def junction_displacement(

@@ -165,7 +165,7 @@ class _Search:
     def __post_init__(self) -> None:
         n = len(self.pieces)
         self.finish_exactly = self.require_closed and n < self.params.large_site_pieces
-        self.weights = feature_weights(self.params)
+        self.weights = feature_weights(self.params, self.pieces)
         self.noise = JunctionNoise.from_params(self.params)
         self.structure, self.boundary, self.measured = _pair_evidence(self.pieces, self.params)
         cost = self.weights[_F["structure"]] * self.structure

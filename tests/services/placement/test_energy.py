@@ -3,6 +3,8 @@ floor seen outside the room."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -16,7 +18,9 @@ from services.placement.energy import (
     junction_displacement,
     outside_area,
 )
-from services.placement.pieces import UNIT
+from services.placement.pieces import UNIT, Piece
+from services.types import Evidence
+from tests.conftest import bare_piece
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -204,6 +208,39 @@ def test_a_switched_off_term_weighs_zero(switch):
         else:
             assert weights[name] == full[name] > 0.0
     assert weights["prior"] == 1.0  # hints are never switched off
+
+
+def _pieces(kinds: list[Evidence]) -> list[Piece]:
+    wall = np.array([[0.0, 0.0], [2.0, 0.0]])
+    return [
+        dataclasses.replace(bare_piece(f"p{k}", wall), evidence=kind)
+        for k, kind in enumerate(kinds)
+    ]
+
+
+FRAME_WEIGHTS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7)
+
+
+def test_frames_take_their_own_weights_in_their_share_of_the_pieces():
+    params = PlacementParams(frame_weights=FRAME_WEIGHTS)
+    clouds = feature_weights(params, _pieces(["cloud", "cloud"]))
+    frames = feature_weights(params, _pieces(["frame", "frame"]))
+    half = feature_weights(params, _pieces(["frame", "thin_cloud"]))
+    assert np.array_equal(clouds, feature_weights(params))
+    assert frames.tolist() == pytest.approx([*FRAME_WEIGHTS, 1.0])
+    assert half.tolist() == pytest.approx(((clouds + frames) / 2).tolist())
+
+
+def test_without_frame_weights_frames_weigh_as_clouds():
+    params = PlacementParams(frame_weights=None)
+    assert np.array_equal(feature_weights(params, _pieces(["frame"])), feature_weights(params))
+
+
+def test_a_switched_off_term_weighs_zero_for_frames_too():
+    params = PlacementParams(frame_weights=FRAME_WEIGHTS, use_structure=False)
+    weights = dict(zip(FEATURES, feature_weights(params, _pieces(["frame"])).tolist(), strict=True))
+    assert weights["structure"] == 0.0
+    assert weights["boundary"] == pytest.approx(0.5)
 
 
 SQUARE = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]])
