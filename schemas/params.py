@@ -102,19 +102,19 @@ class PlacementParams(_Frozen):
     use_outside: bool = Field(
         True, description="penalise floor a scan saw that the closed room leaves outside"
     )
-    weight_turn: float = Field(0.728, ge=0, description="energy per junction that turns")
-    weight_hull: float = Field(0.574, ge=0, description="energy per convex-hull edge")
-    weight_closure: float = Field(0.28, ge=0, description="weight of the closure likelihood")
-    weight_structure: float = Field(2.01, ge=0, description="weight of the structure evidence")
-    weight_boundary: float = Field(2.604, ge=0, description="weight of the boundary mismatch")
+    weight_turn: float = Field(0.38, ge=0, description="energy per junction that turns")
+    weight_hull: float = Field(0.569, ge=0, description="energy per convex-hull edge")
+    weight_closure: float = Field(0.414, ge=0, description="weight of the closure likelihood")
+    weight_structure: float = Field(2.897, ge=0, description="weight of the structure evidence")
+    weight_boundary: float = Field(2.395, ge=0, description="weight of the boundary mismatch")
     weight_conflict: float = Field(
-        0.804, ge=0, description="energy per meter of wall through another scan's seen space"
+        0.624, ge=0, description="energy per meter of wall through another scan's seen space"
     )
     weight_outside: float = Field(
-        2.5, ge=0, description="energy per m² of seen floor the closed room leaves outside"
+        3.844, ge=0, description="energy per m² of seen floor the closed room leaves outside"
     )
     frame_weights: tuple[float, ...] | None = Field(
-        None,
+        (3.028, 0.25, 0.42, 2.72, 3.263, 1.664, 0.401),
         min_length=7,
         max_length=7,
         description="the seven weights above (turn, hull, closure, structure, boundary, "
@@ -211,15 +211,15 @@ class PlacementParams(_Frozen):
         2_000, ge=1, description="search nodes of the fallback search for an open chain"
     )
     unexplored_energy: float = Field(
-        4.594,
+        4.863,
         description="energy above the best of the 'none of these' alternative (local layouts "
         "wrong, truth not found) in the confidence",
     )
     unexplored_per_piece: float = Field(
-        -0.376, description="change of that energy per piece (more pieces, more to go wrong)"
+        -0.357, description="change of that energy per piece (more pieces, more to go wrong)"
     )
     confidence_coefficients: tuple[float, ...] = Field(
-        (1.993, 1.115, -0.014, -0.321, -0.562, -0.222, 0.661),
+        (1.87, 1.303, 0.013, -0.347, -0.515, -0.376, 1.012),
         min_length=7,
         max_length=7,
         description="logistic calibration of the main room's probability over "
@@ -227,14 +227,14 @@ class PlacementParams(_Frozen):
         "conflict, its hidden corners, search truncated); (0, 1, 0, ...) is the share itself",
     )
     frame_calibration: tuple[float, float] = Field(
-        (-0.918, 0.896),
+        (-0.98, 0.537),
         description="(bias, slope) mapping the main room's calibrated logit z to a + b z when "
         "its pieces are RGB-D frames (a share of the pieces: that share of the change): a "
         "frame's chain is wrong more often than a cloud's (bench/rgbd_frames.py --fit, tune "
         "seeds); (0, 1) leaves frames as clouds",
     )
     thin_cloud_calibration: tuple[float, float] = Field(
-        (-1.103, 1.025),
+        (-0.783, 0.78),
         description="the same map for clouds thinner than layout.min_calibrated_points "
         "(bench/sensor_stress.py --fit, tune seeds)",
     )
@@ -277,7 +277,7 @@ class PlacementParams(_Frozen):
         "them had been said closed",
     )
     closed_confidence: float = Field(
-        0.98,
+        0.99,
         gt=0,
         le=1,
         description="confidence at or above which a closed loop is reported 'closed'; below "

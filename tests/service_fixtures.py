@@ -311,16 +311,21 @@ def wait_workers_alive(client: redis.Redis, prefix: str, count: int, timeout: fl
 
 
 def wait_result(
-    http: httpx.Client, site_id: str, timeout: float = 60, status: str | None = None
+    http: httpx.Client,
+    site_id: str,
+    timeout: float = 60,
+    status: str | tuple[str, ...] | None = None,
 ) -> dict[str, Any]:
-    """Poll GET result until it is 200 (and has ``status`` if given); return the JSON."""
+    """Poll GET result until it is 200 (and has ``status``, or one of them, if given);
+    return the JSON."""
+    wanted = (status,) if isinstance(status, str) else status
 
     def ready() -> dict[str, Any] | None:
         reply = http.get(f"/v1/sites/{site_id}/result")
         if reply.status_code != 200:
             return None
         body: dict[str, Any] = reply.json()
-        return body if status is None or body["status"] == status else None
+        return body if wanted is None or body["status"] in wanted else None
 
     def describe() -> str:
         return f"site status {http.get(f'/v1/sites/{site_id}').text}"
