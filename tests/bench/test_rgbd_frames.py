@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from bench.rgbd_frames import LayoutClock, _row, limits, run
-from bench.tune_placement import LIMITS
+from bench.rgbd_frames import LayoutClock, _row, cached_scenes, limits, run
+from bench.tune_placement import LIMITS, main
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -44,3 +44,20 @@ def test_every_rendered_scene_gets_one_limit() -> None:
     found = limits(2, 1000)
     assert sorted(found) == [1000, 1001]
     assert set(found.values()) <= set(LIMITS)
+
+
+def test_cached_frame_scenes_lay_out_each_frame_alone() -> None:
+    [scene] = cached_scenes(1, 1000)
+    assert scene.name == "frames-1000" and scene.seed == 1000
+    assert sorted(scene.layouts) == sorted(f["id"] for f in scene.truth["fragments"])
+    assert all(layout.evidence == "frame" for layout in scene.layouts.values())
+
+
+def test_the_frames_weights_are_fitted_on_rendered_rooms(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["--frames", "2", "--rounds", "1"]) == 0
+    printed = " ".join(capsys.readouterr().out.split())
+    assert "round 1: frame_weights = (" in printed
+    weights = printed.split("frame_weights = (")[1].split(")")[0].split(",")
+    assert len(weights) == 7 and all(float(w) >= 0.0 for w in weights)
