@@ -365,8 +365,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def _fit_frame_weights(n_scenes: int, rounds: int, console: Console) -> int:
     """Fit and print ``frame_weights`` on frame scenes (synthetic and tune-split shapes, in
-    two processes); the frames' calibration map is refitted after, with the new weights
-    (``bench/rgbd_frames.py --fit``)."""
+    two processes). Refit the frames' calibration map with the new weights afterwards
+    (``bench/rgbd_frames.py --fit``): the map depends on them."""
     from bench.rgbd_frames import cached_scenes, frame_outlines
 
     pipeline = PipelineParams()
