@@ -223,7 +223,7 @@ def frame_outlines(split: str) -> list[FloatArray]:
 Result = TypeVar("Result")
 
 
-def _side_by_side(
+def side_by_side(
     measure: Callable[[int, int, list[FloatArray] | None, PipelineParams], Result],
     n_scenes: int,
     first_seed: int,
@@ -246,7 +246,7 @@ def _fit(n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams) -
     off = params.model_copy(
         update={"placement": params.placement.model_copy(update={"frame_calibration": (0, 1)})}
     )
-    runs = _side_by_side(run, n_scenes, first_seed, frame_outlines("tune") if shapes else [], off)
+    runs = side_by_side(run, n_scenes, first_seed, frame_outlines("tune") if shapes else [], off)
     confidences = [c for r in runs.values() for c in r["confidences"]]
     right = [ok for r in runs.values() for ok in r["right"]]
     coefficients, summary = fit_logit_map(confidences, right, params.placement.closed_confidence)
@@ -287,7 +287,7 @@ def limits(
 def _anatomy(n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams) -> None:
     """Print how many scenes each limit decides, synthetic (and real shapes)."""
     outlines = frame_outlines("tune" if first_seed >= 2000 else "test") if shapes else []
-    runs = _side_by_side(limits, n_scenes, first_seed, outlines, params)
+    runs = side_by_side(limits, n_scenes, first_seed, outlines, params)
     print("| rooms | scenes | " + " | ".join(LIMITS) + " |")
     print("|---|---|" + "---|" * len(LIMITS))
     for name, found in runs.items():

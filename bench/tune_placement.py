@@ -197,6 +197,11 @@ def _pool(a: SceneCandidates, b: SceneCandidates) -> SceneCandidates:
     )
 
 
+def _pooled(earlier: list[SceneCandidates], data: list[SceneCandidates]) -> list[SceneCandidates]:
+    """A round's assemblies (``data``) joined to the earlier rounds' (the first round's alone)."""
+    return data if not earlier else [_pool(a, b) for a, b in zip(earlier, data, strict=True)]
+
+
 def fit_weights(data: list[SceneCandidates], ridge: float = 0.01) -> np.ndarray:
     """Weights (len(FITTED),) >= 0 maximising the probability of the right assemblies."""
     sets = []
@@ -342,7 +347,7 @@ def main(argv: list[str] | None = None) -> int:
                 save_candidates(data, args.save)
         # Each round's assemblies join the earlier ones': the weights must tell the truth
         # from what any of the searches so far preferred.
-        pooled = data if not pooled else [_pool(a, b) for a, b in zip(pooled, data, strict=True)]
+        pooled = _pooled(pooled, data)
         w = current if args.keep_weights else fit_weights(pooled)
         calibration = fit_calibration(data, w, 1.0 if args.keep_weights else None)
         temperature, u0, u1 = calibration
@@ -367,21 +372,17 @@ def _fit_frame_weights(n_scenes: int, rounds: int, console: Console) -> int:
     """Fit and print ``frame_weights`` on frame scenes (synthetic and tune-split shapes, in
     two processes). Refit the frames' calibration map with the new weights afterwards
     (``bench/rgbd_frames.py --fit``): the map depends on them."""
-    from bench.rgbd_frames import cached_scenes, frame_outlines
+    from bench.rgbd_frames import cached_scenes, frame_outlines, side_by_side
 
     pipeline = PipelineParams()
-    with ProcessPoolExecutor(2) as pool:
-        jobs = [
-            pool.submit(cached_scenes, n_scenes, _FRAME_SEED, outlines, pipeline)
-            for outlines in (None, frame_outlines("tune"))
-        ]
-        scenes = [scene for job in jobs for scene in job.result()]
+    runs = side_by_side(cached_scenes, n_scenes, _FRAME_SEED, frame_outlines("tune"), pipeline)
+    scenes = [scene for found in runs.values() for scene in found]
     console.log(f"{len(scenes)} frame scenes")
     params = pipeline.placement
     pooled: list[SceneCandidates] = []
     for round_ in range(rounds):
         data = collect(scenes, params, 2)
-        pooled = data if not pooled else [_pool(a, b) for a, b in zip(pooled, data, strict=True)]
+        pooled = _pooled(pooled, data)
         ranked_first = sum(bool(len(s.right) and s.right[0]) for s in data)
         w = fit_weights(pooled)
         temperature = fit_calibration(data, w)[0]

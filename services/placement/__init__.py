@@ -5,7 +5,7 @@
 ``search`` finds the best assemblies; :func:`place_pieces` is the stage's entry.
 """
 
-from services.placement.pieces import Piece, direction_index, make_piece, rot90
+from services.placement.pieces import Piece, direction_index, evidence_share, make_piece, rot90
 from services.placement.priors import SiteHints, hint_pairs, piece_prior
 from services.placement.search import (
     Placement,
@@ -22,6 +22,7 @@ __all__ = [
     "SiteHints",
     "direction_index",
     "evaluate_placement",
+    "evidence_share",
     "hint_pairs",
     "make_piece",
     "piece_prior",

@@ -33,7 +33,7 @@ import numpy as np
 
 from schemas.params import PlacementParams
 from services.geometry import distance_to_polygon, points_in_polygon
-from services.placement.pieces import UNIT, Piece
+from services.placement.pieces import UNIT, Piece, evidence_share
 from services.types import FloatArray
 
 __all__ = [
@@ -97,9 +97,9 @@ def feature_weights(params: PlacementParams, pieces: Sequence[Piece] = ()) -> Fl
             params.weight_outside,
         ]
     )
-    if params.frame_weights is not None and pieces:
-        frame_share = sum(piece.evidence == "frame" for piece in pieces) / len(pieces)
-        weights = weights + frame_share * (np.asarray(params.frame_weights) - weights)
+    if params.frame_weights is not None:
+        frames = evidence_share(pieces, "frame")
+        weights = weights + frames * (np.asarray(params.frame_weights) - weights)
     switches = np.array(
         [
             params.use_complexity,

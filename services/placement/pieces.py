@@ -7,6 +7,7 @@ origin. Rotating a piece by quarter turns and shifting it places it in the site 
 from __future__ import annotations
 
 import itertools
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -23,6 +24,7 @@ __all__ = [
     "Piece",
     "box_of",
     "direction_index",
+    "evidence_share",
     "make_piece",
     "rot90",
     "shift_walls",
@@ -240,6 +242,11 @@ def make_piece(fragment_id: str, layout: LocalLayout) -> Piece:
         ceiling=None if ceiling is None else float(ceiling - floor),
         evidence=layout.evidence,
     )
+
+
+def evidence_share(pieces: Sequence[Piece], kind: Evidence) -> float:
+    """The share of ``pieces`` whose chain rests on evidence of ``kind`` (0 without pieces)."""
+    return sum(piece.evidence == kind for piece in pieces) / max(len(pieces), 1)
 
 
 def _travel_frame(
