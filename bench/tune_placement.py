@@ -238,7 +238,7 @@ def fit_calibration(
     sets = [(s.features @ w, s.right, s.n) for s in data if len(s.right)]
 
     def loss(x: np.ndarray) -> float:
-        t = np.exp(x[0]) if temperature is None else temperature
+        t = _temperature(x[0]) if temperature is None else temperature
         u0, u1 = x[1], x[2]
         total = 0.0
         for energies, right, n in sets:
@@ -249,8 +249,14 @@ def fit_calibration(
         return total
 
     solution = minimize(loss, np.array([0.0, 3.0, 0.0]), method="Nelder-Mead")
-    fitted = float(np.exp(solution.x[0])) if temperature is None else temperature
+    fitted = _temperature(solution.x[0]) if temperature is None else temperature
     return fitted, float(solution.x[1]), float(solution.x[2])
+
+
+def _temperature(log_temperature: float) -> float:
+    """The temperature of a log-temperature, within exp(+-6): fits on a handful of rooms
+    otherwise wander off to a temperature of 0 or infinity (fits find about 1)."""
+    return float(np.exp(np.clip(log_temperature, -6.0, 6.0)))
 
 
 def main_rooms(
