@@ -10,9 +10,13 @@ thresholds (5 % of the fragment's / room's diagonal). Time per frame is that of 
 layout (a merged group's counts once), wall clock and process CPU time (all threads; robust
 to a busy machine).
 
-    .venv/bin/python bench/rgbd_frames.py [--scenes 20] [--seed 1000] [--shapes]
+    .venv/bin/python bench/rgbd_frames.py [--scenes 20] [--seed 1000] [--shapes] [--camera wide]
     .venv/bin/python bench/rgbd_frames.py --fit --scenes 540 --seed 2000 --shapes
     .venv/bin/python bench/rgbd_frames.py --anatomy [--scenes 100] [--shapes]
+
+``--camera`` renders with another depth camera of ``services.synthetic.render.CAMERAS``:
+``kinect`` (the default, 63 degrees across), ``realsense`` (80), ``wide`` (119); the frames'
+calibration was fitted on ``kinect``.
 
 ``--shapes`` also runs rooms of real shapes (the MatterportLayout outlines of
 ``../shared/data``: the test split's for held-out seeds, the tune split's for tune seeds)
@@ -62,6 +66,7 @@ from services.evaluation import evaluate_result  # noqa: E402
 from services.fragments import fragment_layout  # noqa: E402
 from services.pipeline import align_fragments  # noqa: E402
 from services.synthetic.render import (  # noqa: E402
+    CAMERAS,
     FrameScene,
     FrameSpec,
     frame_ground_truth_json,
@@ -89,14 +94,15 @@ class LayoutClock:
 
 
 def _scenes(
-    n_scenes: int, first_seed: int, outlines: list[FloatArray] | None
+    n_scenes: int, first_seed: int, outlines: list[FloatArray] | None, camera: str = "kinect"
 ) -> Iterator[FrameScene | None]:
-    """The frame scenes of seeds ``first_seed`` on (rooms of ``outlines`` in turn, if any);
-    None for a room no station tiles within the camera's range."""
+    """The frame scenes of seeds ``first_seed`` on (rooms of ``outlines`` in turn, if any),
+    seen by one of ``CAMERAS``; None for a room no station tiles within the camera's range."""
+    spec = FrameSpec(intrinsics=CAMERAS[camera])
     for k in range(n_scenes):
         outline = outlines[k % len(outlines)] if outlines else None
         try:
-            yield generate_frame_scene(FrameSpec(), first_seed + k, outline)
+            yield generate_frame_scene(spec, first_seed + k, outline)
         except RuntimeError:
             yield None
 
@@ -106,15 +112,17 @@ def run(
     first_seed: int,
     outlines: list[FloatArray] | None = None,
     params: PipelineParams = PipelineParams(),
+    camera: str = "kinect",
 ) -> dict[str, Any]:
-    """Local and global figures over ``n_scenes`` frame scenes from ``first_seed``;
-    ``"confidences"`` and ``"right"`` list each main room's confidence and verdict."""
+    """Local and global figures over ``n_scenes`` frame scenes from ``first_seed``, seen by
+    ``CAMERAS[camera]``; ``"confidences"`` and ``"right"`` list each main room's confidence
+    and verdict."""
     local, global_ok, rotation, translation, frames, statuses = [], [], [], [], [], []
     confidences: list[float] = []
     right: list[bool] = []
     clock = LayoutClock()
     skipped = 0
-    for scene in _scenes(n_scenes, first_seed, outlines):
+    for scene in _scenes(n_scenes, first_seed, outlines, camera):
         if scene is None:
             skipped += 1
             continue
@@ -184,26 +192,33 @@ def main() -> None:
     parser.add_argument("--shapes", action="store_true", help="also real room shapes")
     parser.add_argument("--fit", action="store_true", help="fit the frames' calibration")
     parser.add_argument("--anatomy", action="store_true", help="what limits each scene")
+    parser.add_argument(
+        "--camera", choices=sorted(CAMERAS), default="kinect", help="the depth camera rendered"
+    )
     add_params_option(parser)
     args = parser.parse_args()
     params = params_with(args.set)
     if args.fit:
-        _fit(args.scenes, args.seed, args.shapes, params)
+        _fit(args.scenes, args.seed, args.shapes, params, args.camera)
         return
     if args.anatomy:
-        _anatomy(args.scenes, args.seed, args.shapes, params)
+        _anatomy(args.scenes, args.seed, args.shapes, params, args.camera)
         return
+    camera = CAMERAS[args.camera]
+    across = math.degrees(2 * math.atan(camera.width / (2 * camera.fx)))
+    print(f"camera: {args.camera}, {camera.width}x{camera.height}, {across:.0f} degrees across")
     print(
         "| rooms | scenes | frames | ACC_local % | ACC_global % | rotation deg | "
         "translation % | said closed (right) | ambiguous | ms/frame median (p90) | "
         "CPU ms/frame median (p90) |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|")
-    print(_row("synthetic", run(args.scenes, args.seed, None, params)))
+    print(_row("synthetic", run(args.scenes, args.seed, None, params, args.camera)))
     # Tune seeds (2000 and up) draw the shapes' tune split, held-out seeds its test split.
     outlines = frame_outlines("tune" if args.seed >= 2000 else "test") if args.shapes else []
     if outlines:
-        print(_row("MatterportLayout shapes", run(args.scenes, args.seed, outlines, params)))
+        shapes = run(args.scenes, args.seed, outlines, params, args.camera)
+        print(_row("MatterportLayout shapes", shapes))
     print("paper (RGB-D and clouds): ACC_global 85.1 %, rotation 8.79 deg, translation 9.15 %")
 
 
@@ -224,29 +239,31 @@ Result = TypeVar("Result")
 
 
 def side_by_side(
-    measure: Callable[[int, int, list[FloatArray] | None, PipelineParams], Result],
+    measure: Callable[[int, int, list[FloatArray] | None, PipelineParams, str], Result],
     n_scenes: int,
     first_seed: int,
     outlines: list[FloatArray],
     params: PipelineParams,
+    camera: str = "kinect",
 ) -> dict[str, Result]:
     """``measure`` of the synthetic rooms and, when there are ``outlines``, of the real
-    shapes, in two processes (the machine's two cores)."""
+    shapes, seen by ``CAMERAS[camera]``, in two processes (the machine's two cores)."""
     with ProcessPoolExecutor(2) as pool:
-        jobs = {"synthetic": pool.submit(measure, n_scenes, first_seed, None, params)}
+        jobs = {"synthetic": pool.submit(measure, n_scenes, first_seed, None, params, camera)}
         if outlines:
             jobs["MatterportLayout shapes"] = pool.submit(
-                measure, n_scenes, first_seed, outlines, params
+                measure, n_scenes, first_seed, outlines, params, camera
             )
         return {name: job.result() for name, job in jobs.items()}
 
 
-def _fit(n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams) -> None:
+def _fit(n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams, camera: str) -> None:
     """Fit and print the frames' calibration on synthetic (and tune-split shaped) rooms."""
     off = params.model_copy(
         update={"placement": params.placement.model_copy(update={"frame_calibration": (0, 1)})}
     )
-    runs = side_by_side(run, n_scenes, first_seed, frame_outlines("tune") if shapes else [], off)
+    outlines = frame_outlines("tune") if shapes else []
+    runs = side_by_side(run, n_scenes, first_seed, outlines, off, camera)
     confidences = [c for r in runs.values() for c in r["confidences"]]
     right = [ok for r in runs.values() for ok in r["right"]]
     coefficients, summary = fit_logit_map(confidences, right, params.placement.closed_confidence)
@@ -258,11 +275,13 @@ def cached_scenes(
     first_seed: int,
     outlines: list[FloatArray] | None = None,
     params: PipelineParams = PipelineParams(),
+    camera: str = "kinect",
 ) -> list[CachedScene]:
-    """The frame scenes of seeds ``first_seed`` on, each frame laid out on its own (no
-    merging), with their truth; rooms no station tiles are left out."""
+    """The frame scenes of seeds ``first_seed`` on, seen by ``CAMERAS[camera]``, each frame
+    laid out on its own (no merging), with their truth; rooms no station tiles are left
+    out."""
     out = []
-    for scene in _scenes(n_scenes, first_seed, outlines):
+    for scene in _scenes(n_scenes, first_seed, outlines, camera):
         if scene is not None:
             layouts = {f.id: fragment_layout(f.frame, params) for f in scene.frames}
             truth = frame_ground_truth_json(scene)
@@ -275,19 +294,22 @@ def limits(
     first_seed: int,
     outlines: list[FloatArray] | None = None,
     params: PipelineParams = PipelineParams(),
+    camera: str = "kinect",
 ) -> dict[int, str]:
-    """Seed -> what limits that frame scene (:func:`bench.tune_placement.limit_of`); rooms no
-    station tiles are left out."""
+    """Seed -> what limits that frame scene (:func:`bench.tune_placement.limit_of`), seen by
+    ``CAMERAS[camera]``; rooms no station tiles are left out."""
     return {
         scene.seed: limit_of(scene_candidates(scene, params.placement))
-        for scene in cached_scenes(n_scenes, first_seed, outlines, params)
+        for scene in cached_scenes(n_scenes, first_seed, outlines, params, camera)
     }
 
 
-def _anatomy(n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams) -> None:
+def _anatomy(
+    n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams, camera: str
+) -> None:
     """Print how many scenes each limit decides, synthetic (and real shapes)."""
     outlines = frame_outlines("tune" if first_seed >= 2000 else "test") if shapes else []
-    runs = side_by_side(limits, n_scenes, first_seed, outlines, params)
+    runs = side_by_side(limits, n_scenes, first_seed, outlines, params, camera)
     print("| rooms | scenes | " + " | ".join(LIMITS) + " |")
     print("|---|---|" + "---|" * len(LIMITS))
     for name, found in runs.items():

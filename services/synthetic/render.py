@@ -45,6 +45,7 @@ from services.synthetic.scene import fragment_truth
 from services.types import FloatArray
 
 __all__ = [
+    "CAMERAS",
     "KINECT",
     "FrameScene",
     "FrameSpec",
@@ -67,7 +68,15 @@ _MATERIALS = np.array(
     dtype=np.float64,
 )
 KINECT = IntrinsicsModel(width=640, height=480, fx=525.0, fy=525.0, cx=319.5, cy=239.5)
-"""A Kinect-like depth camera (TUM RGB-D's default intrinsics)."""
+"""A Kinect-like depth camera (TUM RGB-D's default intrinsics): 63 degrees across."""
+CAMERAS = {
+    "kinect": KINECT,
+    # A RealSense D435-like depth stream at 640x480: 80 degrees across.
+    "realsense": IntrinsicsModel(width=640, height=480, fx=385.0, fy=385.0, cx=319.5, cy=239.5),
+    # A wide-angle depth camera (Azure Kinect's wide field of view): 119 degrees across.
+    "wide": IntrinsicsModel(width=640, height=480, fx=190.0, fy=190.0, cx=319.5, cy=239.5),
+}
+"""Depth cameras the frame generator renders with, by name."""
 
 _WALL, _FLOOR, _CEILING, _OUTSIDE, _FURNITURE = range(5)
 _RAY_STEP = math.radians(0.25)  # floor-plan rays of a view: a few cm apart at 7 m

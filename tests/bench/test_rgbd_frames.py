@@ -8,8 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from bench.rgbd_frames import LayoutClock, _row, cached_scenes, limits, run
+from bench.rgbd_frames import LayoutClock, _row, _scenes, cached_scenes, limits, run
 from bench.tune_placement import LIMITS, main
+from services.synthetic.render import CAMERAS, KINECT
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -44,6 +45,15 @@ def test_every_rendered_scene_gets_one_limit() -> None:
     found = limits(2, 1000)
     assert sorted(found) == [1000, 1001]
     assert set(found.values()) <= set(LIMITS)
+
+
+def test_the_scenes_are_rendered_by_the_camera_asked_for() -> None:
+    [kinect] = _scenes(1, 1000, None)
+    [wide] = _scenes(1, 1000, None, "wide")
+    assert kinect is not None and wide is not None
+    assert {f.frame.intrinsics for f in kinect.frames} == {KINECT}
+    assert {f.frame.intrinsics for f in wide.frames} == {CAMERAS["wide"]}
+    assert all(f.frame.depth.shape == (480, 640) for f in wide.frames)
 
 
 def test_cached_frame_scenes_lay_out_each_frame_alone() -> None:
