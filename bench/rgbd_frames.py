@@ -15,7 +15,7 @@ to a busy machine).
     .venv/bin/python bench/rgbd_frames.py --anatomy [--scenes 100] [--shapes]
 
 ``--camera`` renders with another depth camera of ``services.synthetic.render.CAMERAS``:
-``kinect`` (the default, 63 degrees across), ``realsense`` (80), ``wide`` (119); the frames'
+``kinect`` (the default, 63 degrees across), ``realsense`` (79), ``wide`` (119); the frames'
 calibration was fitted on ``kinect``.
 
 ``--shapes`` also runs rooms of real shapes (the MatterportLayout outlines of

@@ -14,7 +14,6 @@ import numpy as np
 from scipy.optimize import minimize
 
 from schemas.params import PipelineParams, PlacementParams
-from services.evaluation import evaluate_result
 from services.layout_model import build_polygon
 from services.pipeline import fragment_pose
 from services.placement import Piece, PlacementCandidate, translations_of
@@ -101,19 +100,13 @@ def main_room_verdict(
 ) -> tuple[float, bool] | None:
     """(confidence, right) of a result's main room, None when its loop did not close.
 
-    What a confidence map is fitted on: every result with a main assembly, whatever its
-    status. ``reported_right``: the result's own verdict (``evaluate_result``), the main
-    room's when it is closed or ambiguous. A lone room the confidence doubts is reported
-    'open' without a floorplan (the contract wants a runner-up for 'ambiguous'), so it is
-    judged by the loop it kept in ``diagnostics.unconfirmed_polygon``.
+    What a confidence map is fitted on: every result with a main room, whatever its status
+    (a lone room the confidence doubts is reported 'open' with its floorplan).
+    ``reported_right``: the result's own verdict (``evaluate_result``).
     """
-    if result["status"] in ("closed", "ambiguous"):
-        return float(result["confidence"]), reported_right
-    polygon = result.get("diagnostics", {}).get("unconfirmed_polygon")
-    if result["status"] != "open" or polygon is None:
+    if result["status"] == "failed" or not result.get("floorplan", {}).get("rooms"):
         return None
-    kept = {**result, "floorplan": {"rooms": [{"polygon": polygon}]}}
-    return float(result["confidence"]), evaluate_result(kept, truth).global_correct
+    return float(result["confidence"]), reported_right
 
 
 def fit_logit_map(

@@ -493,9 +493,11 @@ def _status(
     params: PipelineParams,
 ) -> tuple[str, float]:
     """The result's status and confidence (see the contract, section 3)."""
-    if main.polygon is None or main.assembly is None or n_usable < 2 or n_usable < n_all:
+    if main.polygon is None or main.assembly is None:
         return "open", 0.0
     confidence = main.assembly.probability
+    if n_usable < n_all:  # the room of the usable fragments, a guess without the others
+        return "open", confidence
     # A floorplan with a wall askew or crossing another was joined from chains that miss
     # a corner or do not fit: however likely the assembly, it is no room to act on unseen.
     if confidence >= params.placement.closed_confidence and main.rectilinear:
@@ -576,7 +578,7 @@ def place_site(
     kinds = [layouts[fid].evidence for fid in usable]
     diagnostics["evidence"] = {kind: kinds.count(kind) for kind in sorted(set(kinds))}
     if status == "open" and main.polygon is not None:
-        diagnostics["unconfirmed_polygon"] = main.polygon.tolist()
+        diagnostics["unconfirmed_room"] = True  # a loop closed, but not one to vouch for
     if unexplained:
         diagnostics["unexplained_walls"] = unexplained  # why a room that closes is doubted
     if slid:
@@ -588,9 +590,10 @@ def place_site(
         status=status,
         confidence=confidence,
         fragments=list(fragments.values()),
-        # An open result has no room (contract section 3): a loop we could close but do not
-        # trust stays in the diagnostics.
-        floorplan=_rooms(main.polygon if status != "open" else None, height),
+        # A loop that closed but is doubted with no runner-up to show is "open" (the
+        # contract's "ambiguous" needs one): its floorplan is the best guess, as its poses
+        # are, and its confidence says how far to trust it.
+        floorplan=_rooms(main.polygon, height),
         alternatives=[_alternative(alt, height) for alt in alternatives],
         diagnostics=diagnostics,
     )

@@ -31,10 +31,11 @@ Out, after each placement:
 
 Poses and transforms go out for results closed, ambiguous or open (an open result's poses
 are its best partial guess, as on ``fpj/sites/*/poses``), the map only for closed and
-ambiguous ones (an open result has no room). Transforms and map are stamped with the time of
-publication: tf2 ignores a transform sent again with an unchanged stamp (TF_REPEATED_DATA),
-and a placement may move a fragment. Graph liveliness tokens of the node and of every
-subscription and publisher make them show in ``ros2 node list`` / ``ros2 topic list``.
+ambiguous ones (an open result's room, if any, is a guess not to navigate by). Transforms
+and map are stamped with the time of publication: tf2 ignores a transform sent again with an
+unchanged stamp (TF_REPEATED_DATA), and a placement may move a fragment. Graph liveliness
+tokens of the node and of every subscription and publisher make them show in
+``ros2 node list`` / ``ros2 topic list``.
 """
 
 from __future__ import annotations

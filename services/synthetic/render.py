@@ -71,7 +71,7 @@ KINECT = IntrinsicsModel(width=640, height=480, fx=525.0, fy=525.0, cx=319.5, cy
 """A Kinect-like depth camera (TUM RGB-D's default intrinsics): 63 degrees across."""
 CAMERAS = {
     "kinect": KINECT,
-    # A RealSense D435-like depth stream at 640x480: 80 degrees across.
+    # A RealSense D435-like depth stream at 640x480: 79 degrees across.
     "realsense": IntrinsicsModel(width=640, height=480, fx=385.0, fy=385.0, cx=319.5, cy=239.5),
     # A wide-angle depth camera (Azure Kinect's wide field of view): 119 degrees across.
     "wide": IntrinsicsModel(width=640, height=480, fx=190.0, fy=190.0, cx=319.5, cy=239.5),

@@ -22,21 +22,14 @@ def test_a_main_room_is_judged_whatever_its_status() -> None:
     confidence = result["confidence"]
     reported = evaluate_result(result, truth).global_correct
     assert main_room_verdict(result, truth, reported) == (confidence, True)
-    # A lone room the confidence doubts is reported open, its loop kept in the diagnostics.
-    polygon = result["floorplan"]["rooms"][0]["polygon"]
-    doubted = {
-        **result,
-        "status": "open",
-        "floorplan": {"rooms": []},
-        "diagnostics": {**result["diagnostics"], "unconfirmed_polygon": polygon},
-    }
-    assert main_room_verdict(doubted, truth, False) == (confidence, True)
-    moved = {**doubted["diagnostics"], "unconfirmed_polygon": (np.array(polygon) * 1.5).tolist()}
-    assert main_room_verdict({**doubted, "diagnostics": moved}, truth, False) == (confidence, False)
+    # A lone room the confidence doubts is reported open, with its floorplan: judged alike.
+    doubted = {**result, "status": "open"}
+    assert main_room_verdict(doubted, truth, reported) == (confidence, True)
+    assert main_room_verdict(doubted, truth, False) == (confidence, False)
     # An open loop without a room, or a failure, has no main room to judge.
-    unclosed = {**doubted, "diagnostics": result["diagnostics"]}
+    unclosed = {**doubted, "floorplan": {"rooms": []}}
     assert main_room_verdict(unclosed, truth, False) is None
-    assert main_room_verdict({**unclosed, "status": "failed"}, truth, False) is None
+    assert main_room_verdict({**result, "status": "failed"}, truth, False) is None
 
 
 def test_an_overconfident_kind_gets_a_map_that_lowers_its_high_confidences() -> None:

@@ -102,6 +102,8 @@ def test_fragment_without_walls_is_reported_unplaced():
     layouts["floor_only"] = estimate_layout(floor)
     result = place_site(layouts)
     assert result.status == "open"
+    # The usable fragments still close: their room is the best guess, as likely as they say.
+    assert len(result.floorplan.rooms) == 1 and result.confidence > 0.5
     by_id = {f.id: f for f in result.fragments}
     assert not by_id["floor_only"].placed
     assert by_id["floor_only"].loop_index is None
@@ -556,16 +558,22 @@ def test_a_prior_the_scans_contradict_pins_nothing():
     assert result.diagnostics["hints_contradicted"]
 
 
-def test_a_doubted_lone_room_that_no_slide_changes_stays_open():
+def test_a_doubted_lone_room_that_no_slide_changes_stays_open_with_its_floorplan():
     # The slid runners-up are offered only where sliding makes another room. In a 40 x 30 m
     # room the same slide is a fraction of what tells two rooms apart: doubted (here by a
-    # bar no room reaches), the lone assembly has no runner-up and stays open.
+    # bar no room reaches), the lone assembly has no runner-up and stays open, its loop the
+    # best guess (item 6: two pieces that close make a room with a floorplan).
     never = PipelineParams().placement.model_copy(update={"closed_confidence": 1.0})
     small = place_site(_halves(3.0, 2.0), PipelineParams(placement=never))
     large = place_site(_halves(40.0, 30.0), PipelineParams(placement=never))
     assert small.status == "ambiguous" and small.diagnostics["slid_alternatives"] == 2
     assert large.status == "open" and not large.alternatives
     assert "slid_alternatives" not in large.diagnostics
+    assert large.diagnostics["unconfirmed_room"] is True
+    assert 0.5 < large.confidence < 1.0
+    [room] = large.floorplan.rooms
+    polygon = np.asarray(room.polygon)
+    assert np.ptp(polygon, axis=0) == pytest.approx([40.0, 30.0], abs=0.3)
 
 
 def test_a_doubted_wall_that_may_slide_along_itself_is_offered_elsewhere():
