@@ -130,7 +130,7 @@ def run(
         result = aligned.result.model_dump(mode="json")
         truth = frame_ground_truth_json(scene)
         report = evaluate_result(result, truth)
-        verdict = main_room_verdict(result, truth, report.global_correct)
+        verdict = main_room_verdict(result, report.global_correct)
         if verdict is not None:
             confidences.append(verdict[0])
             right.append(verdict[1])

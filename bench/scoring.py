@@ -95,9 +95,7 @@ def alternative_results(result: Mapping[str, Any]) -> list[dict[str, Any]]:
     return out
 
 
-def main_room_verdict(
-    result: Mapping[str, Any], truth: Mapping[str, Any], reported_right: bool
-) -> tuple[float, bool] | None:
+def main_room_verdict(result: Mapping[str, Any], reported_right: bool) -> tuple[float, bool] | None:
     """(confidence, right) of a result's main room, None when its loop did not close.
 
     What a confidence map is fitted on: every result with a main room, whatever its status

@@ -67,7 +67,7 @@ def run(
                     "status": result["status"],
                     "right": right,
                     # The main room's confidence and verdict (None: the loop did not close).
-                    "main": main_room_verdict(result, truth, right),
+                    "main": main_room_verdict(result, right),
                 }
             )
     return records
@@ -77,7 +77,7 @@ def _row(variant: str, bucket: str, records: list[dict[str, Any]]) -> str:
     right = np.array([r["right"] for r in records], dtype=bool)
     statuses = [r["status"] for r in records]
     closed = np.array([s == "closed" for s in statuses])
-    conf = np.array([r["main"][0] if r["main"] and r["status"] != "open" else 0.0 for r in records])
+    conf = np.array([r["main"][0] if r["main"] else 0.0 for r in records])
     return (
         f"| {variant} | {bucket} | {len(records)} | {100 * right.mean():.1f} | "
         f"{int(closed.sum())} ({int(right[closed].sum())}) | {statuses.count('ambiguous')} | "

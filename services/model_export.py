@@ -58,8 +58,9 @@ def _wall_strips(chains: list[FloatArray], floor_z: float, ceiling_z: float) -> 
 def layout_model(result: ResultModel) -> LayoutMesh | None:
     """The 3D layout as a triangle mesh in the site frame, or None when nothing is placed.
 
-    A closed room gives walls, floor and ceiling (:func:`services.layout_model.layout_mesh`);
-    an open result gives the walls of the placed chains only.
+    A result with a room (closed, ambiguous, or an open result's unconfirmed guess) gives
+    walls, floor and ceiling (:func:`services.layout_model.layout_mesh`); one without a
+    room gives the walls of the placed chains only.
     """
     rooms = [room for room in result.floorplan.rooms if len(room.polygon) >= 3]
     if rooms:

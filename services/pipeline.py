@@ -563,7 +563,7 @@ def place_site(
     status, confidence = _status(main, alternatives, len(usable), len(layouts), params)
     alternatives = _reported(alternatives, status, params)
     sure: dict[str, float] = {}
-    if status != "open" and main.assembly is not None:
+    if main.polygon is not None and main.assembly is not None:  # a room, vouched for or not
         share = params.placement.same_room_share
         sure = fragment_confidences(main.assembly, assemblies, share)
     for index, fid in enumerate(main.candidate.order):

@@ -92,7 +92,7 @@ __all__ = ["MAP_STATUSES", "RosBridge", "cloud_fragment_id", "topic_robot"]
 
 log = logging.getLogger(__name__)
 
-MAP_STATUSES = ("closed", "ambiguous")  # results whose floorplan is a closed room
+MAP_STATUSES = ("closed", "ambiguous")  # results whose room is one to navigate by
 
 
 class _Stamped(Protocol):

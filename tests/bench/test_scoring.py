@@ -21,15 +21,15 @@ def test_a_main_room_is_judged_whatever_its_status() -> None:
     assert result["status"] == "closed"
     confidence = result["confidence"]
     reported = evaluate_result(result, truth).global_correct
-    assert main_room_verdict(result, truth, reported) == (confidence, True)
+    assert main_room_verdict(result, reported) == (confidence, True)
     # A lone room the confidence doubts is reported open, with its floorplan: judged alike.
     doubted = {**result, "status": "open"}
-    assert main_room_verdict(doubted, truth, reported) == (confidence, True)
-    assert main_room_verdict(doubted, truth, False) == (confidence, False)
+    assert main_room_verdict(doubted, reported) == (confidence, True)
+    assert main_room_verdict(doubted, False) == (confidence, False)
     # An open loop without a room, or a failure, has no main room to judge.
     unclosed = {**doubted, "floorplan": {"rooms": []}}
-    assert main_room_verdict(unclosed, truth, False) is None
-    assert main_room_verdict({**result, "status": "failed"}, truth, False) is None
+    assert main_room_verdict(unclosed, False) is None
+    assert main_room_verdict({**result, "status": "failed"}, False) is None
 
 
 def test_an_overconfident_kind_gets_a_map_that_lowers_its_high_confidences() -> None:

@@ -571,6 +571,8 @@ def test_a_doubted_lone_room_that_no_slide_changes_stays_open_with_its_floorplan
     assert "slid_alternatives" not in large.diagnostics
     assert large.diagnostics["unconfirmed_room"] is True
     assert 0.5 < large.confidence < 1.0
+    # Its fragments' own confidences are those of a room, as in a result that shows one.
+    assert all(f.confidence is not None and f.confidence > 0.5 for f in large.fragments)
     [room] = large.floorplan.rooms
     polygon = np.asarray(room.polygon)
     assert np.ptp(polygon, axis=0) == pytest.approx([40.0, 30.0], abs=0.3)
