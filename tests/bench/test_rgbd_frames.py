@@ -54,6 +54,8 @@ def test_the_scenes_are_rendered_by_the_camera_asked_for() -> None:
     assert {f.frame.intrinsics for f in kinect.frames} == {KINECT}
     assert {f.frame.intrinsics for f in wide.frames} == {CAMERAS["wide"]}
     assert all(f.frame.depth.shape == (480, 640) for f in wide.frames)
+    # The benchmark's figures are of the camera asked for.
+    assert run(1, 1000, camera="wide")["frames"] == len(wide.frames) != len(kinect.frames)
 
 
 def test_cached_frame_scenes_lay_out_each_frame_alone() -> None:
