@@ -12,10 +12,10 @@ from functools import cache
 import numpy as np
 import open3d as o3d
 
-from schemas.frames import IntrinsicsModel
 from services.rgbd import RgbdFrame, encode_frame_files
 from services.synthetic.furniture import Furnishing
 from services.synthetic.render import (
+    CAMERAS,
     KINECT,
     FrameScene,
     FrameSpec,
@@ -26,7 +26,7 @@ from services.synthetic.render import (
 )
 from services.synthetic.room import Room
 
-WIDE = IntrinsicsModel(width=640, height=480, fx=190.0, fy=190.0, cx=319.5, cy=239.5)
+WIDE = CAMERAS["wide"]
 THREE_FRAMES = FrameSpec(
     n_corners_range=(4, 4),
     size_range=((4.0, 4.5), (5.0, 5.5)),
