@@ -11,12 +11,14 @@ layout (a merged group's counts once), wall clock and process CPU time (all thre
 to a busy machine).
 
     .venv/bin/python bench/rgbd_frames.py [--scenes 20] [--seed 1000] [--shapes] [--camera wide]
-    .venv/bin/python bench/rgbd_frames.py --fit --scenes 540 --seed 2000 --shapes
+    .venv/bin/python bench/rgbd_frames.py --fit --scenes 100 --seed 2000 --shapes
+        --camera kinect --camera realsense --camera wide   (one line)
     .venv/bin/python bench/rgbd_frames.py --anatomy [--scenes 100] [--shapes]
 
 ``--camera`` renders with another depth camera of ``services.synthetic.render.CAMERAS``:
-``kinect`` (the default, 63 degrees across), ``realsense`` (79), ``wide`` (119); the frames'
-calibration was fitted on ``kinect``.
+``kinect`` (the default, 63 degrees across), ``realsense`` (79), ``wide`` (119); repeated, each
+in turn (``--fit`` pools them and also fits the map's change with the view angle,
+``frame_view_slope``).
 
 ``--shapes`` also runs rooms of real shapes (the MatterportLayout outlines of
 ``../shared/data``: the test split's for held-out seeds, the tune split's for tune seeds)
@@ -62,6 +64,7 @@ from bench.scoring import (  # noqa: E402
 from bench.tune_placement import LIMITS, limit_of, scene_candidates  # noqa: E402
 from bench.world_scenes import CachedScene  # noqa: E402
 from schemas.params import PipelineParams  # noqa: E402
+from services.confidence import KINECT_VIEW  # noqa: E402
 from services.evaluation import evaluate_result  # noqa: E402
 from services.fragments import fragment_layout  # noqa: E402
 from services.pipeline import align_fragments  # noqa: E402
@@ -115,11 +118,12 @@ def run(
     camera: str = "kinect",
 ) -> dict[str, Any]:
     """Local and global figures over ``n_scenes`` frame scenes from ``first_seed``, seen by
-    ``CAMERAS[camera]``; ``"confidences"`` and ``"right"`` list each main room's confidence
-    and verdict."""
+    ``CAMERAS[camera]``; ``"confidences"``, ``"right"`` and ``"views"`` list each main
+    room's confidence, verdict and its frames' mean view angle (radians)."""
     local, global_ok, rotation, translation, frames, statuses = [], [], [], [], [], []
     confidences: list[float] = []
     right: list[bool] = []
+    views: list[float] = []
     clock = LayoutClock()
     skipped = 0
     for scene in _scenes(n_scenes, first_seed, outlines, camera):
@@ -134,6 +138,8 @@ def run(
         if verdict is not None:
             confidences.append(verdict[0])
             right.append(verdict[1])
+            angles = [v.view_angle for v in aligned.layouts.values() if v.ok and v.view_angle]
+            views.append(float(np.mean(angles)) if angles else math.nan)
         local += list(report.local_correct.values())
         global_ok.append(report.global_correct)
         statuses.append(result["status"])
@@ -161,6 +167,7 @@ def run(
         "cpu_ms_per_frame_p90": cpu_ms_p90,
         "confidences": confidences,
         "right": right,
+        "views": views,
     }
 
 
@@ -178,8 +185,18 @@ def _row(name: str, r: dict[str, Any]) -> str:
         f"{100 * r['acc_global']:.1f} | {r['rotation_deg']:.2f} | {r['translation_pct']:.2f} | "
         f"{r['closed']} ({r['closed_right']}) | {r['ambiguous']} | "
         f"{r['ms_per_frame']:.0f} ({r['ms_per_frame_p90']:.0f}) | "
-        f"{r['cpu_ms_per_frame']:.0f} ({r['cpu_ms_per_frame_p90']:.0f}) |"
+        f"{r['cpu_ms_per_frame']:.0f} ({r['cpu_ms_per_frame_p90']:.0f}) | {_calibration(r)} |"
     )
+
+
+def _calibration(r: dict[str, Any]) -> str:
+    """Main rooms' mean confidence, share right and Brier score, e.g. "0.61 / 0.58 / 0.17"."""
+    if not r["confidences"]:
+        return "-"
+    confidence = np.asarray(r["confidences"], dtype=np.float64)
+    right = np.asarray(r["right"], dtype=np.float64)
+    brier = float(np.mean((confidence - right) ** 2))
+    return f"{confidence.mean():.2f} / {right.mean():.2f} / {brier:.3f}"
 
 
 def main() -> None:
@@ -193,32 +210,41 @@ def main() -> None:
     parser.add_argument("--fit", action="store_true", help="fit the frames' calibration")
     parser.add_argument("--anatomy", action="store_true", help="what limits each scene")
     parser.add_argument(
-        "--camera", choices=sorted(CAMERAS), default="kinect", help="the depth camera rendered"
+        "--camera",
+        choices=sorted(CAMERAS),
+        action="append",
+        help="the depth camera rendered (repeat for several; --fit pools them; default kinect)",
     )
     add_params_option(parser)
     args = parser.parse_args()
     params = params_with(args.set)
+    cameras = args.camera or ["kinect"]
     if args.fit:
-        _fit(args.scenes, args.seed, args.shapes, params, args.camera)
+        _fit(args.scenes, args.seed, args.shapes, params, cameras)
         return
-    if args.anatomy:
-        _anatomy(args.scenes, args.seed, args.shapes, params, args.camera)
-        return
-    camera = CAMERAS[args.camera]
+    for camera in cameras:
+        if args.anatomy:
+            _anatomy(args.scenes, args.seed, args.shapes, params, camera)
+        else:
+            _table(args.scenes, args.seed, args.shapes, params, camera)
+
+
+def _table(n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams, name: str) -> None:
+    """Print the figures of the frames of one camera, synthetic (and real shapes)."""
+    camera = CAMERAS[name]
     across = math.degrees(2 * math.atan(camera.width / (2 * camera.fx)))
-    print(f"camera: {args.camera}, {camera.width}x{camera.height}, {across:.0f} degrees across")
+    print(f"camera: {name}, {camera.width}x{camera.height}, {across:.0f} degrees across")
     print(
         "| rooms | scenes | frames | ACC_local % | ACC_global % | rotation deg | "
         "translation % | said closed (right) | ambiguous | ms/frame median (p90) | "
-        "CPU ms/frame median (p90) |"
+        "CPU ms/frame median (p90) | main rooms: mean confidence / right / Brier |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
-    print(_row("synthetic", run(args.scenes, args.seed, None, params, args.camera)))
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print(_row("synthetic", run(n_scenes, first_seed, None, params, name)))
     # Tune seeds (2000 and up) draw the shapes' tune split, held-out seeds its test split.
-    outlines = frame_outlines("tune" if args.seed >= 2000 else "test") if args.shapes else []
+    outlines = frame_outlines("tune" if first_seed >= 2000 else "test") if shapes else []
     if outlines:
-        shapes = run(args.scenes, args.seed, outlines, params, args.camera)
-        print(_row("MatterportLayout shapes", shapes))
+        print(_row("MatterportLayout shapes", run(n_scenes, first_seed, outlines, params, name)))
     print("paper (RGB-D and clouds): ACC_global 85.1 %, rotation 8.79 deg, translation 9.15 %")
 
 
@@ -257,17 +283,33 @@ def side_by_side(
         return {name: job.result() for name, job in jobs.items()}
 
 
-def _fit(n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams, camera: str) -> None:
-    """Fit and print the frames' calibration on synthetic (and tune-split shaped) rooms."""
-    off = params.model_copy(
-        update={"placement": params.placement.model_copy(update={"frame_calibration": (0, 1)})}
+def _fit(
+    n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams, cameras: list[str]
+) -> None:
+    """Fit and print the frames' calibration on synthetic (and tune-split shaped) rooms seen
+    by each of ``cameras``; with more than one, also the map's change per radian of view."""
+    placement = params.placement.model_copy(
+        update={"frame_calibration": (0, 1), "frame_view_slope": 0.0}
     )
+    off = params.model_copy(update={"placement": placement})
     outlines = frame_outlines("tune") if shapes else []
-    runs = side_by_side(run, n_scenes, first_seed, outlines, off, camera)
-    confidences = [c for r in runs.values() for c in r["confidences"]]
-    right = [ok for r in runs.values() for ok in r["right"]]
-    coefficients, summary = fit_logit_map(confidences, right, params.placement.closed_confidence)
-    print(f"frame_calibration = {coefficients}: {summary}")
+    confidences: list[float] = []
+    right: list[bool] = []
+    views: list[float] = []
+    for camera in cameras:
+        for r in side_by_side(run, n_scenes, first_seed, outlines, off, camera).values():
+            confidences += r["confidences"]
+            right += r["right"]
+            views += r["views"]
+    # A room without a frame's chain (no view known) is taken as the kinect's.
+    wider = [0.0 if math.isnan(v) else v - KINECT_VIEW for v in views] if len(cameras) > 1 else None
+    coefficients, summary = fit_logit_map(
+        confidences, right, params.placement.closed_confidence, wider
+    )
+    print(f"frame_calibration = {coefficients[:2]}", end="")
+    if len(coefficients) > 2:
+        print(f", frame_view_slope = {coefficients[2]}", end="")
+    print(f": {summary}")
 
 
 def cached_scenes(

@@ -108,25 +108,33 @@ def main_room_verdict(result: Mapping[str, Any], reported_right: bool) -> tuple[
 
 
 def fit_logit_map(
-    confidences: Sequence[float], right: Sequence[bool], closed: float
-) -> tuple[tuple[float, float], str]:
+    confidences: Sequence[float],
+    right: Sequence[bool],
+    closed: float,
+    extra: Sequence[float] | None = None,
+) -> tuple[tuple[float, ...], str]:
     """A map (bias, slope) of the confidence's logit for one kind of evidence
     (``PlacementParams.frame_calibration``, ``thin_cloud_calibration``): logistic regression
     of the main rooms' verdicts on the logits of their confidences, computed with the map off
-    (:func:`main_room_verdict`). Returns it and a line on what it does to those rooms at the
-    ``closed`` threshold."""
+    (:func:`main_room_verdict`). With ``extra`` (one value per room, e.g. the frames' view
+    angle beyond the kinect's) the map is (bias, slope, per unit of it). Returns it and a
+    line on what it does to those rooms at the ``closed`` threshold."""
     conf = np.clip(np.asarray(confidences, dtype=np.float64), 1e-9, 1 - 1e-9)
     logit = np.log(conf / (1 - conf))
     ok = np.asarray(right, dtype=bool)
-    bias, slope = fit_logistic(np.column_stack([np.ones_like(logit), logit]), ok)
-    mapped = 1.0 / (1.0 + np.exp(-(bias + slope * logit)))
+    columns = [np.ones_like(logit), logit]
+    if extra is not None:
+        columns.append(np.asarray(extra, dtype=np.float64))
+    inputs = np.column_stack(columns)
+    coefficients = fit_logistic(inputs, ok)
+    mapped = 1.0 / (1.0 + np.exp(-(inputs @ coefficients)))
     summary = (
         f"{len(ok)} main rooms, {int(ok.sum())} right; at >= {closed}: before "
         f"{int((conf >= closed).sum())} closed ({int(ok[conf >= closed].sum())} right), after "
         f"{int((mapped >= closed).sum())} ({int(ok[mapped >= closed].sum())} right); Brier "
         f"{float(np.mean((conf - ok) ** 2)):.3f} -> {float(np.mean((mapped - ok) ** 2)):.3f}"
     )
-    return (round(float(bias), 3), round(float(slope), 3)), summary
+    return tuple(round(float(c), 3) for c in coefficients), summary
 
 
 def fit_logistic(inputs: np.ndarray, right: np.ndarray, ridge: float = 0.1) -> np.ndarray:

@@ -39,3 +39,9 @@ class LocalLayoutWire(BaseModel):
     unchained_walls: str = Field(
         "", description="centres of wall cells no wall of the chain runs through (base64)"
     )
+    view_angle: float | None = Field(
+        None,
+        ge=0,
+        description="RGB-D frames: the horizontal angle the cameras see across, radians "
+        "(summed over merged frames); null for point clouds",
+    )

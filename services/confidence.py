@@ -44,6 +44,7 @@ from services.types import Evidence, FloatArray
 
 __all__ = [
     "CALIBRATION_FEATURES",
+    "KINECT_VIEW",
     "Assembly",
     "calibration_features",
     "floorplan_diagonal",
@@ -54,6 +55,7 @@ __all__ = [
     "same_room_groups",
 ]
 
+KINECT_VIEW = 1.094  # rad (63 degrees across): the camera the frames' map was first fitted on
 CALIBRATION_FEATURES = (
     "bias", "logit share", "pieces", "closure", "conflict", "turns", "truncated",
 )  # fmt: skip
@@ -218,7 +220,8 @@ def _evidence_shift(pieces: Sequence[Piece], z: float, params: PlacementParams) 
     """The change of the main room's logit ``z`` for pieces resting on less than the
     calibration's clouds: each kind's map a + b z, in the share of the pieces of that kind.
     With a slope under 1 a map also lifts the lowest confidences a little (below a / (1 - b):
-    about 0.11 for frames, 0.03 for thin clouds), as the fit found them."""
+    about 0.11 for frames, 0.03 for thin clouds), as the fit found them. Frames' rooms also
+    move by ``frame_view_slope`` per radian their cameras see across beyond the kinect's."""
     maps: dict[Evidence, tuple[float, float]] = {
         "frame": params.frame_calibration,
         "thin_cloud": params.thin_cloud_calibration,
@@ -226,6 +229,10 @@ def _evidence_shift(pieces: Sequence[Piece], z: float, params: PlacementParams) 
     shift = 0.0
     for kind, (bias, slope) in maps.items():
         shift += evidence_share(pieces, kind) * (bias + (slope - 1.0) * z)
+    views = [p.view_angle for p in pieces if p.evidence == "frame" and p.view_angle is not None]
+    if views:
+        wider = float(np.mean(views)) - KINECT_VIEW
+        shift += evidence_share(pieces, "frame") * params.frame_view_slope * wider
     return shift
 
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from schemas.frames import IntrinsicsModel
 from schemas.params import PipelineParams
-from services.frustum import CameraView, in_any_view, side_rays, swept_cells
+from services.frustum import CameraView, in_any_view, side_rays, swept_cells, view_angle
 from services.local_layout import FOOTPRINT_CELL, boundary_points, footprint_cells
 from services.manhattan import estimate_manhattan_frame, thin_with_normals
 from services.rgbd import OPTICAL_TO_LEVEL, RgbdFrame, backproject
@@ -406,7 +406,11 @@ def estimate_frame_layout(
     if chain is None or len(chain.keypoints) < 2:
         report("done", 1.0)
         return LocalLayout(
-            keypoints=np.zeros((0, 2)), frame=frame, footprint=footprint, evidence="frame"
+            keypoints=np.zeros((0, 2)),
+            frame=frame,
+            footprint=footprint,
+            evidence="frame",
+            view_angle=view_angle(views),
         )
     kp = _past_corner_fronts(chain.keypoints, lines)
     kp = _drop_end_reveals(_flatten_furniture(_flatten_corner_fronts(kp)))
@@ -420,6 +424,7 @@ def estimate_frame_layout(
         target_boundary=boundary_points(aligned, kp[-1], _unit(kp[-2] - kp[-1]), band, depth),
         footprint=footprint,
         evidence="frame",
+        view_angle=view_angle(views),
     )
 
 

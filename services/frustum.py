@@ -21,7 +21,14 @@ from numpy.typing import NDArray
 from schemas.frames import IntrinsicsModel
 from services.types import FloatArray
 
-__all__ = ["CameraView", "in_any_view", "side_rays", "swept_cells", "visible_band"]
+__all__ = [
+    "CameraView",
+    "in_any_view",
+    "side_rays",
+    "swept_cells",
+    "view_angle",
+    "visible_band",
+]
 
 _FLAT = 1e-9
 _SWEEP_BIN = np.radians(0.5)  # bearing bins of the swept rays: 5 cm apart at 6 m
@@ -175,6 +182,22 @@ def side_rays(view: CameraView) -> FloatArray:
         direction = direction / norm
         rays.append(direction if direction @ view.forward >= 0 else -direction)
     return np.array(rays)
+
+
+def view_angle(views: Sequence[CameraView]) -> float:
+    """The horizontal angle (radians) the views see across at their cameras' height,
+    summed over the views and at most a full turn.
+
+    >>> level = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])
+    >>> k = IntrinsicsModel(width=640, height=480, fx=320, fy=320, cx=319.5, cy=239.5)
+    >>> round(np.degrees(view_angle([CameraView.from_intrinsics(k, level, np.zeros(3))])), 1)
+    90.0
+    """
+    total = 0.0
+    for view in views:
+        right, left = side_rays(view)
+        total += float(np.arccos(np.clip(right @ left, -1.0, 1.0)))
+    return min(total, 2.0 * np.pi)
 
 
 def swept_cells(views: Sequence[CameraView], xy: FloatArray, cell: float) -> FloatArray:

@@ -74,6 +74,9 @@ class LocalLayout:
     evidence: what the chain rests on: ``"cloud"``, ``"thin_cloud"`` (fewer points than any
     cloud the confidence was fitted on) or ``"frame"`` (RGB-D frames). The last two are
     wrong more often in ways no placement term sees, so rooms of them are calibrated apart.
+    view_angle: frames only: the horizontal angle the cameras see across, radians, summed
+    over merged frames (None for clouds). A wider view sees more walls, so its chains are
+    right more often and its rooms are calibrated by it.
     """
 
     keypoints: FloatArray
@@ -83,6 +86,7 @@ class LocalLayout:
     footprint: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     evidence: Evidence = "cloud"
     unchained_walls: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    view_angle: float | None = None
 
     @property
     def ok(self) -> bool:

@@ -40,6 +40,7 @@ def layout_to_wire(layout: LocalLayout) -> LocalLayoutWire:
         footprint=encode_array(layout.footprint),
         evidence=layout.evidence,
         unchained_walls=encode_array(layout.unchained_walls),
+        view_angle=layout.view_angle,
     )
 
 
@@ -59,4 +60,5 @@ def layout_from_wire(wire: LocalLayoutWire) -> LocalLayout:
         footprint=decode_array(wire.footprint, 2),
         evidence=wire.evidence,
         unchained_walls=decode_array(wire.unchained_walls, 2),
+        view_angle=wire.view_angle,
     )

@@ -168,6 +168,7 @@ class Piece:
     free: the seen open space, piece frame.
     ceiling: ceiling height above the floor, or None when the scan saw no ceiling.
     evidence: what the chain rests on (see LocalLayout).
+    view_angle: frames only, the horizontal angle their cameras see across (see LocalLayout).
     """
 
     id: str
@@ -179,6 +180,7 @@ class Piece:
     free: FreeSpace
     ceiling: float | None = None
     evidence: Evidence = "cloud"
+    view_angle: float | None = None
 
     @cached_property
     def turning(self) -> int:
@@ -241,6 +243,7 @@ def make_piece(fragment_id: str, layout: LocalLayout) -> Piece:
         free=_free_space(footprint, kp),
         ceiling=None if ceiling is None else float(ceiling - floor),
         evidence=layout.evidence,
+        view_angle=layout.view_angle,
     )
 
 

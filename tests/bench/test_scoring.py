@@ -43,6 +43,20 @@ def test_an_overconfident_kind_gets_a_map_that_lowers_its_high_confidences() -> 
     assert "400 main rooms" in summary and "after 0 (0 right)" in summary
 
 
+def test_a_map_with_another_input_learns_that_more_of_it_is_less_often_right() -> None:
+    # The same confidences, right 90 % of the time with a narrow view and 60 % with a wide one.
+    rng = np.random.default_rng(1)
+    confidences = [0.9] * 400
+    view = [0.0] * 200 + [1.0] * 200
+    right = list(rng.random(200) < 0.9) + list(rng.random(200) < 0.6)
+    (bias, slope, per_view), summary = fit_logit_map(confidences, right, 0.95, view)
+    assert per_view < -1.0
+    z = np.log(0.9 / 0.1)
+    narrow, wide = (1.0 / (1.0 + np.exp(-(bias + slope * z + per_view * v))) for v in (0, 1))
+    assert narrow == pytest.approx(0.9, abs=0.05) and wide == pytest.approx(0.6, abs=0.07)
+    assert "400 main rooms" in summary
+
+
 @pytest.mark.parametrize(("right", "total"), [(0, 10), (11, 21), (30, 30), (80, 80)])
 def test_a_share_interval_holds_the_share_and_narrows_with_more_scenes(right, total) -> None:
     lo, hi = share_interval(right, total)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from services.confidence import (
+    KINECT_VIEW,
     rank_assemblies,
     room_slack,
     same_room_groups,
@@ -130,6 +131,21 @@ def test_frames_map_the_main_logit_in_their_share_of_the_pieces(l_room):
     assert _main_logit(pieces, placement, params, 2) == pytest.approx(half)
     identity = GEOMETRY.model_copy(update={"frame_calibration": (0.0, 1.0)})
     assert _main_logit(pieces, placement, identity, 4) == pytest.approx(clouds)
+
+
+def test_frames_of_a_wider_view_shift_the_logit_by_the_view_slope(l_room):
+    pieces, placement, _ = _ranked(l_room, [1.0, 9.5, 12.5, 20.0])
+    params = GEOMETRY.model_copy(
+        update={"frame_calibration": (-1.0, 0.5), "frame_view_slope": -1.5}
+    )
+    kinect = _main_logit(pieces, placement, params, 2)
+    views = [KINECT_VIEW + 0.4, KINECT_VIEW + 0.8, None, None]
+    wide = [dataclasses.replace(p, view_angle=v) for p, v in zip(pieces, views, strict=True)]
+    # Half the pieces are frames, their mean view 0.6 rad wider than the kinect's.
+    assert _main_logit(wide, placement, params, 2) == pytest.approx(kinect + 0.5 * -1.5 * 0.6)
+    # A frame whose view is unknown (stored before it was kept) is taken as the kinect's.
+    unknown = [dataclasses.replace(p, view_angle=None) for p in pieces]
+    assert _main_logit(unknown, placement, params, 2) == pytest.approx(kinect)
 
 
 def test_a_doubted_room_makes_its_runners_up_no_likelier_than_itself(l_room):

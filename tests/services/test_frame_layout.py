@@ -9,7 +9,7 @@ import pytest
 from schemas.params import PipelineParams
 from services.evaluation import evaluate_result, keypoint_error
 from services.frame_layout import estimate_rgbd_layout, frame_points
-from services.frustum import CameraView, in_any_view, visible_band
+from services.frustum import CameraView, in_any_view, view_angle, visible_band
 from services.local_layout import footprint_cells
 from services.pipeline import place_site
 from services.synthetic.furniture import Furnishing, Opening
@@ -37,8 +37,9 @@ def test_three_frames_make_the_right_room_with_poses_of_their_own_points() -> No
     scene = three_frames(ROOM_SEED)
     layouts = {f.id: estimate_rgbd_layout(f.frame) for f in scene.frames}
     result = place_site(layouts)
-    # Right, but a frame site short of near-certainty is ambiguous (tests/frame_fixtures.py).
-    assert result.status in ("closed", "ambiguous") and result.confidence > 0.9
+    # Right, but a frame site short of near-certainty is ambiguous (tests/frame_fixtures.py),
+    # and the wide camera's rooms are doubted more than the kinect's (frame_view_slope).
+    assert result.status in ("closed", "ambiguous") and result.confidence > 0.75
     report = evaluate_result(result.model_dump(mode="json"), frame_ground_truth_json(scene))
     assert report.global_correct
     assert all(e.rotation_deg < 2.0 for e in report.pose_errors.values())
@@ -73,6 +74,8 @@ def test_a_kinect_frame_is_laid_out() -> None:
     up = layout.frame.rotation[2]
     truth_up = scene.frames[0].pose[:3, :3].T @ np.array([0.0, 0.0, 1.0])
     assert np.degrees(np.arccos(np.clip(up @ truth_up, -1, 1))) < 2.0
+    # Its view is about the kinect's 63 degrees (at the camera's height; its pitch moves it).
+    assert layout.view_angle is not None and 1.04 < layout.view_angle < 1.15
 
 
 def test_frustum_band_and_field_of_view() -> None:
@@ -85,6 +88,10 @@ def test_frustum_band_and_field_of_view() -> None:
     assert high[0] == pytest.approx(2.0 * 240 / 190, rel=1e-3)
     assert low[0] == pytest.approx(-2.0 * 240 / 190, rel=1e-3)
     assert np.isnan(visible_band([], np.zeros((1, 2)))[0][0])
+    across = 2 * np.arctan(320 / 190)  # the wide camera's 119 degrees
+    assert view_angle([view]) == pytest.approx(across, rel=1e-3)
+    assert view_angle([view, view]) == pytest.approx(2 * across, rel=1e-3)  # merged frames
+    assert view_angle([view] * 4) == pytest.approx(2 * np.pi)  # never more than a full turn
 
 
 def test_frame_points_keep_a_wide_angle_image_whole() -> None:

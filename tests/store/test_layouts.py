@@ -55,3 +55,15 @@ def test_a_stored_layout_without_its_evidence_is_a_clouds():
     old = layout_to_wire(layout).model_dump(mode="json")
     del old["evidence"]
     assert layout_from_wire(LocalLayoutWire.model_validate(old)).evidence == "cloud"
+
+
+def test_a_frames_view_angle_survives_the_wire():
+    layout = dataclasses.replace(
+        scene_layouts()[small_scene("easy", 0).fragments[0].id], evidence="frame", view_angle=1.4
+    )
+    wire = layout_to_wire(layout)
+    back = layout_from_wire(LocalLayoutWire.model_validate_json(wire.model_dump_json()))
+    assert back.view_angle == 1.4
+    old = wire.model_dump(mode="json")
+    del old["view_angle"]  # stored before the field existed: unknown, no shift
+    assert layout_from_wire(LocalLayoutWire.model_validate(old)).view_angle is None
