@@ -273,6 +273,19 @@ class PlacementParams(_Frozen):
         "with that much wall unexplained, 2 of 9 were right by the paper's test (5 of 12 on "
         "the test split: the missed wall is often a short fin the test forgives)",
     )
+    conflict_wall_limit: float = Field(
+        2.0,
+        gt=0,
+        description="meters of the main room's walls running through space another scan "
+        "saw empty (the energy's conflict term, unrefined loop) from which it is not said "
+        "closed: a wall the chains missed, closed over by walls where the scans saw floor",
+    )
+    conflict_confidence: float = Field(
+        0.98,
+        ge=0,
+        le=1,
+        description="the most such a room's confidence can be (below closed_confidence)",
+    )
     relaxed_refinement_confidence: float = Field(
         0.25,
         ge=0,

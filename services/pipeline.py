@@ -411,6 +411,36 @@ def _check_refinement(main: _Placed, params: PipelineParams) -> _Placed:
     return _capped(main, params.placement.relaxed_refinement_confidence)
 
 
+def _check_conflict(main: _Placed, params: PipelineParams) -> tuple[_Placed, float]:
+    """The main room with its confidence capped when ``conflict_wall_limit`` or more of its
+    walls run through space another scan saw empty, and those meters (0 when under the
+    limit). The energy weighs the conflict against the other terms, and a room can still
+    win by them; but a room said closed must not contradict what the scans saw."""
+    meters = float(main.candidate.features.get("conflict", 0.0))
+    if main.assembly is None or meters < params.placement.conflict_wall_limit - 1e-9:
+        return main, 0.0
+    return _capped(main, params.placement.conflict_confidence), round(meters, 2)
+
+
+def _doubts(
+    main: _Placed, status: str, unexplained: dict[str, float], conflicting: float, slid: int
+) -> dict[str, Any]:
+    """The diagnostics that say why a room that closes is not said closed (only those that
+    apply)."""
+    doubts: dict[str, Any] = {}
+    if status == "open" and main.polygon is not None:
+        doubts["unconfirmed_room"] = True  # a loop closed, but not one to vouch for
+    if unexplained:
+        doubts["unexplained_walls"] = unexplained  # walls seen inside it, off its floorplan
+    if conflicting:
+        doubts["conflicting_walls"] = conflicting  # its walls cross space scans saw empty
+    if slid:
+        doubts["slid_alternatives"] = slid  # the runners-up are this room resized
+    if main.polygon is not None and not main.rectilinear:
+        doubts["floorplan_not_rectilinear"] = True
+    return doubts
+
+
 def _capped(main: _Placed, most: float) -> _Placed:
     """The main room with its probability at most ``most``."""
     assert main.assembly is not None
@@ -550,6 +580,7 @@ def place_site(
     sigmas = _trusted_sigmas(site_hints, placement, pieces, params)
     main, alternatives, assemblies = _choose(layouts, pieces, placement, params, site_hints, sigmas)
     main, unexplained = _check_walls(_check_refinement(main, params), layouts, params)
+    main, conflicting = _check_conflict(main, params)
     slid = 0
     doubted = main.assembly is not None and (
         main.assembly.probability < params.placement.closed_confidence
@@ -577,14 +608,7 @@ def place_site(
     # What the chains rest on: frames and thin clouds lower the confidence (its maps per kind).
     kinds = [layouts[fid].evidence for fid in usable]
     diagnostics["evidence"] = {kind: kinds.count(kind) for kind in sorted(set(kinds))}
-    if status == "open" and main.polygon is not None:
-        diagnostics["unconfirmed_room"] = True  # a loop closed, but not one to vouch for
-    if unexplained:
-        diagnostics["unexplained_walls"] = unexplained  # why a room that closes is doubted
-    if slid:
-        diagnostics["slid_alternatives"] = slid  # the runners-up are this room resized
-    if main.polygon is not None and not main.rectilinear:
-        diagnostics["floorplan_not_rectilinear"] = True  # why it is not said closed
+    diagnostics.update(_doubts(main, status, unexplained, conflicting, slid))
     report("done", 1.0)
     return ResultModel(
         status=status,

@@ -636,6 +636,37 @@ def test_walls_on_the_floorplan_or_beyond_it_leave_the_room_as_it_was():
     assert result.confidence is not None and result.confidence > 0.9
 
 
+def _seen_through_the_top_wall(
+    layouts: dict[str, LocalLayout], width: float
+) -> dict[str, LocalLayout]:
+    """The room of two with the wall scan's floor seen from its wall to 0.5 m past the top
+    wall, over ``width`` meters: the top wall runs that far through space it saw empty."""
+    cell = 0.25
+    xs = 1.0 + cell * (np.arange(round(width / cell)) + 0.5)
+    ys = cell * (np.arange(1, 27) + 0.5)
+    seen = np.array([[x, y] for x in xs for y in ys])
+    return {**layouts, "wall": dataclasses.replace(layouts["wall"], footprint=seen)}
+
+
+def test_a_room_whose_walls_cross_space_a_scan_saw_empty_is_not_said_closed():
+    # The energy weighs such a conflict against the other terms, and a room can win by
+    # them; but a room said closed must not contradict what its scans saw.
+    placement = PipelineParams().placement.model_copy(
+        update={"closed_confidence": 0.9, "conflict_confidence": 0.85}
+    )
+    params = PipelineParams(placement=placement)
+    layouts = _room_of_two(np.zeros((0, 2)))
+    assert place_site(layouts, params).status == "closed"
+    little = place_site(_seen_through_the_top_wall(layouts, 1.5), params)
+    assert little.status == "closed" and "conflicting_walls" not in little.diagnostics
+    crossed = place_site(_seen_through_the_top_wall(layouts, 3.0), params)
+    meters = crossed.diagnostics["energy"]["conflict"]
+    assert meters >= placement.conflict_wall_limit
+    assert crossed.status != "closed" and crossed.confidence == pytest.approx(0.85)
+    assert crossed.diagnostics["conflicting_walls"] == pytest.approx(meters, abs=0.01)
+    assert crossed.floorplan.rooms  # still the best guess, shown as such
+
+
 def test_a_room_whose_walls_do_not_fit_its_loop_is_not_said_closed():
     # A corridor (U, with 0.3 m of the hall's wall past its mouth) and a hall whose chain
     # runs on over the corridor's mouth: the likeliest assembly puts the corridor flush with
