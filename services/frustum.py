@@ -190,7 +190,8 @@ def view_angle(views: Sequence[CameraView]) -> float:
 
     >>> level = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])
     >>> k = IntrinsicsModel(width=640, height=480, fx=320, fy=320, cx=319.5, cy=239.5)
-    >>> round(np.degrees(view_angle([CameraView.from_intrinsics(k, level, np.zeros(3))])), 1)
+    >>> view = CameraView.from_intrinsics(k, level, np.zeros(3))
+    >>> round(float(np.degrees(view_angle([view]))), 1)
     90.0
     """
     total = 0.0
