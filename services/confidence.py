@@ -56,6 +56,9 @@ __all__ = [
 ]
 
 KINECT_VIEW = 1.094  # rad (63 degrees across): the camera the frames' map was first fitted on
+# rad (119 degrees): the widest view the map's slope was fitted on; wider views (merged
+# frames, panoramas) are taken as this, not extrapolated.
+_WIDEST_FITTED_VIEW = 2.08
 CALIBRATION_FEATURES = (
     "bias", "logit share", "pieces", "closure", "conflict", "turns", "truncated",
 )  # fmt: skip
@@ -231,7 +234,7 @@ def _evidence_shift(pieces: Sequence[Piece], z: float, params: PlacementParams) 
         shift += evidence_share(pieces, kind) * (bias + (slope - 1.0) * z)
     views = [p.view_angle for p in pieces if p.evidence == "frame" and p.view_angle is not None]
     if views:
-        wider = float(np.mean(views)) - KINECT_VIEW
+        wider = min(float(np.mean(views)), _WIDEST_FITTED_VIEW) - KINECT_VIEW
         shift += evidence_share(pieces, "frame") * params.frame_view_slope * wider
     return shift
 

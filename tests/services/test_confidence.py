@@ -143,6 +143,14 @@ def test_frames_of_a_wider_view_shift_the_logit_by_the_view_slope(l_room):
     wide = [dataclasses.replace(p, view_angle=v) for p, v in zip(pieces, views, strict=True)]
     # Half the pieces are frames, their mean view 0.6 rad wider than the kinect's.
     assert _main_logit(wide, placement, params, 2) == pytest.approx(kinect + 0.5 * -1.5 * 0.6)
+    # Views wider than any the slope was fitted on (merged frames, a panorama) count as the
+    # widest fitted (119 degrees), not extrapolated.
+    panorama = [dataclasses.replace(p, view_angle=2 * math.pi) for p in pieces]
+    widest = [dataclasses.replace(p, view_angle=2.08) for p in pieces]
+    assert _main_logit(panorama, placement, params, 2) == pytest.approx(
+        _main_logit(widest, placement, params, 2)
+    )
+    assert _main_logit(widest, placement, params, 2) < _main_logit(wide, placement, params, 2)
     # A frame whose view is unknown (stored before it was kept) is taken as the kinect's.
     unknown = [dataclasses.replace(p, view_angle=None) for p in pieces]
     assert _main_logit(unknown, placement, params, 2) == pytest.approx(kinect)
