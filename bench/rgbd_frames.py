@@ -64,7 +64,7 @@ from bench.scoring import (  # noqa: E402
 from bench.tune_placement import LIMITS, limit_of, scene_candidates  # noqa: E402
 from bench.world_scenes import CachedScene  # noqa: E402
 from schemas.params import PipelineParams  # noqa: E402
-from services.confidence import KINECT_VIEW  # noqa: E402
+from services.confidence import view_beyond_kinect  # noqa: E402
 from services.evaluation import evaluate_result  # noqa: E402
 from services.fragments import fragment_layout  # noqa: E402
 from services.pipeline import align_fragments  # noqa: E402
@@ -119,7 +119,8 @@ def run(
 ) -> dict[str, Any]:
     """Local and global figures over ``n_scenes`` frame scenes from ``first_seed``, seen by
     ``CAMERAS[camera]``; ``"confidences"``, ``"right"`` and ``"views"`` list each main
-    room's confidence, verdict and its frames' mean view angle (radians)."""
+    room's confidence, verdict and its frames' view beyond the kinect's
+    (:func:`services.confidence.view_beyond_kinect`, radians)."""
     local, global_ok, rotation, translation, frames, statuses = [], [], [], [], [], []
     confidences: list[float] = []
     right: list[bool] = []
@@ -138,8 +139,8 @@ def run(
         if verdict is not None:
             confidences.append(verdict[0])
             right.append(verdict[1])
-            angles = [v.view_angle for v in aligned.layouts.values() if v.ok and v.view_angle]
-            views.append(float(np.mean(angles)) if angles else math.nan)
+            laid_out = [v for v in aligned.layouts.values() if v.ok]
+            views.append(view_beyond_kinect([v.view_angle for v in laid_out if v.view_angle]))
         local += list(report.local_correct.values())
         global_ok.append(report.global_correct)
         statuses.append(result["status"])
@@ -301,8 +302,7 @@ def _fit(
             confidences += r["confidences"]
             right += r["right"]
             views += r["views"]
-    # A room without a frame's chain (no view known) is taken as the kinect's.
-    wider = [0.0 if math.isnan(v) else v - KINECT_VIEW for v in views] if len(cameras) > 1 else None
+    wider = views if len(cameras) > 1 else None
     coefficients, summary = fit_logit_map(
         confidences, right, params.placement.closed_confidence, wider
     )

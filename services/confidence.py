@@ -53,6 +53,7 @@ __all__ = [
     "room_slack",
     "same_room",
     "same_room_groups",
+    "view_beyond_kinect",
 ]
 
 KINECT_VIEW = 1.094  # rad (63 degrees across): the camera the frames' map was first fitted on
@@ -233,10 +234,17 @@ def _evidence_shift(pieces: Sequence[Piece], z: float, params: PlacementParams) 
     for kind, (bias, slope) in maps.items():
         shift += evidence_share(pieces, kind) * (bias + (slope - 1.0) * z)
     views = [p.view_angle for p in pieces if p.evidence == "frame" and p.view_angle is not None]
-    if views:
-        wider = min(float(np.mean(views)), _WIDEST_FITTED_VIEW) - KINECT_VIEW
-        shift += evidence_share(pieces, "frame") * params.frame_view_slope * wider
-    return shift
+    wider = view_beyond_kinect(views)
+    return shift + evidence_share(pieces, "frame") * params.frame_view_slope * wider
+
+
+def view_beyond_kinect(views: Sequence[float]) -> float:
+    """What the frames' map weighs by ``frame_view_slope``: the frames' mean view angle
+    (radians) beyond the kinect's, the widest fitted at most; 0 when none is known (a frame
+    stored before its view was kept is taken as the kinect's)."""
+    if not views:
+        return 0.0
+    return min(float(np.mean(views)), _WIDEST_FITTED_VIEW) - KINECT_VIEW
 
 
 def fragment_confidences(

@@ -403,6 +403,7 @@ def estimate_frame_layout(
         np.vstack([footprint_cells(aligned), swept_cells(views, aligned[:, :2], FOOTPRINT_CELL)]),
         axis=0,
     )
+    across = view_angle(views)
     if chain is None or len(chain.keypoints) < 2:
         report("done", 1.0)
         return LocalLayout(
@@ -410,7 +411,7 @@ def estimate_frame_layout(
             frame=frame,
             footprint=footprint,
             evidence="frame",
-            view_angle=view_angle(views),
+            view_angle=across,
         )
     kp = _past_corner_fronts(chain.keypoints, lines)
     kp = _drop_end_reveals(_flatten_furniture(_flatten_corner_fronts(kp)))
@@ -424,7 +425,7 @@ def estimate_frame_layout(
         target_boundary=boundary_points(aligned, kp[-1], _unit(kp[-2] - kp[-1]), band, depth),
         footprint=footprint,
         evidence="frame",
-        view_angle=view_angle(views),
+        view_angle=across,
     )
 
 
