@@ -6,6 +6,7 @@ service publishes is decoded with rosbags and checked against the result.
 
 from __future__ import annotations
 
+import asyncio
 import threading
 import time
 from typing import Any
@@ -15,11 +16,17 @@ import pytest
 import zenoh
 
 from api.zenoh import ros2
+from api.zenoh.bridge import LoopBridge
+from api.zenoh.ros_bridge import RosBridge
+from schemas.result import ResultModel
+from services.frame_layout import estimate_rgbd_layout
 from services.geometry import distance_to_polygon, points_in_polygon
 from services.occupancy import FREE, OCCUPIED, UNKNOWN, rasterize_floorplan
+from services.pipeline import place_site
 from services.rgbd import backproject
+from store.backend import Backend
 from tests.frame_fixtures import ROOM_SEED, three_frames
-from tests.service_fixtures import wait_result, wait_until
+from tests.service_fixtures import make_settings, wait_result, wait_until
 from tests.zenoh.conftest import (
     ROS_DEPTH_SITE,
     ROS_DEPTH_TOPIC,
@@ -128,3 +135,71 @@ def test_depth_frames_close_the_site_and_map_and_transforms_come_out(
         xy = (local @ pose[:3, :3].T + pose[:3, 3])[:, :2]
         near = points_in_polygon(xy, polygon) | (distance_to_polygon(xy, polygon) < 0.15)
         assert near.mean() > 0.98, (synthetic.id, near.mean())
+
+
+class Count:
+    """How many messages of a topic came for one frame id."""
+
+    def __init__(self, decode: Any, frame_of: Any, frame_id: str) -> None:
+        self.decode, self.frame_of, self.frame_id = decode, frame_of, frame_id
+        self.count = 0
+        self.lock = threading.Lock()
+
+    def __call__(self, sample: zenoh.Sample) -> None:  # zenoh thread
+        if self.frame_of(self.decode(sample.payload.to_bytes())) == self.frame_id:
+            with self.lock:
+                self.count += 1
+
+    def get(self) -> int:
+        with self.lock:
+            return self.count
+
+
+def test_an_open_result_sends_transforms_but_no_map_to_navigate_by(
+    zenoh_service: ZenohService,
+) -> None:
+    # A loop that closed into a room the confidence doubts, with no runner-up, is "open"
+    # but keeps that room as its floorplan (README, a lone doubted room): its poses and
+    # transforms go out, its OccupancyGrid does not (ros_bridge.MAP_STATUSES). The same
+    # room, said closed, is then published with its map: messages of one publisher arrive in
+    # order, so a map of the open result would have come first and made two. The bridge
+    # publishes on a robot's session (a real one, connected to the service) that also
+    # subscribes: the service's own bridge is driven by its workers' results instead.
+    site, map_topic, tf_topic = "ros_open_site", "/open_test/map", "/open_test/tf"
+    scene = three_frames(ROOM_SEED)
+    closed = place_site({f.id: estimate_rgbd_layout(f.frame) for f in scene.frames})
+    assert closed.floorplan.rooms
+    doubted = closed.model_copy(update={"status": "open"})
+    settings = make_settings(
+        zenoh_service.settings.redis_url, zenoh_ros_map_topic=map_topic, zenoh_ros_tf_topic=tf_topic
+    )
+    maps = Count(ros2.decode_occupancy_grid, lambda g: g[3], site)
+    transforms = Count(ros2.decode_tf_message, lambda ts: ts[0].parent_frame if ts else "", site)
+
+    async def publish(session: zenoh.Session, results: list[ResultModel]) -> None:
+        backend = await Backend.connect(settings)
+        declared = []
+        try:
+            bridge = RosBridge(backend, session, LoopBridge(asyncio.get_running_loop()))
+            declared = bridge.declare()
+            for result in results:
+                await bridge.publish_result(site, result)
+        finally:
+            for entity in declared:
+                entity.undeclare()
+            await backend.aclose()
+
+    with robot_session(zenoh_service) as session:
+        map_key = ros2.topic_key(0, map_topic, ros2.MAP_TYPE)
+        tf_key = ros2.topic_key(0, tf_topic, ros2.TF_TYPE)
+        with (
+            session.declare_subscriber(map_key, maps),
+            session.declare_subscriber(tf_key, transforms),
+        ):
+            asyncio.run(publish(session, [doubted, closed]))
+            wait_until(
+                lambda: transforms.get() == 2 and maps.get() >= 1,
+                20,
+                describe=lambda: f"{transforms.get()} transforms, {maps.get()} maps",
+            )
+    assert maps.get() == 1
