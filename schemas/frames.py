@@ -57,6 +57,13 @@ class FrameParams(BaseModel):
         description="largest pixel stride over rows and columns (smaller for wide-angle or "
         "small images, so points stay about 3 cm apart at 4 m)",
     )
+    max_voxels: int = Field(
+        10_000,
+        ge=100,
+        description="most voxels a frame is thinned to: a wider view (a wide-angle camera sees "
+        "about twice the surface of a Kinect's) is thinned with larger voxels, so a 640x480 "
+        "frame takes about as long to lay out whatever its lens",
+    )
     camera_height: float = Field(
         1.3,
         gt=0,

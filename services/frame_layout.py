@@ -369,7 +369,9 @@ def estimate_frame_layout(
         raise ValueError("a frame layout needs at least one camera")
     report = progress or (lambda stage, fraction: None)
     report("manhattan", 0.0)
-    cloud = thin_with_normals(points @ OPTICAL_TO_LEVEL.T, params.manhattan)
+    cloud = thin_with_normals(
+        points @ OPTICAL_TO_LEVEL.T, params.manhattan, params.layout.frame.max_voxels
+    )
     # The level frame's up is within the camera's pitch and roll of the truth (well inside
     # the tilt limit), so the plane search that only seeds it can stop at the first planes.
     seed_search = {"max_planes": min(params.manhattan.max_planes, _SEED_PLANES)}

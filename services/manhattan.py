@@ -43,21 +43,30 @@ class OrientedCloud:
     normals: FloatArray
 
 
-def thin_with_normals(points: FloatArray, params: ManhattanParams) -> OrientedCloud:
+def thin_with_normals(
+    points: FloatArray, params: ManhattanParams, max_voxels: int | None = None
+) -> OrientedCloud:
     """Thin to one point per voxel and estimate a normal for each.
 
     Parameters
     ----------
     points : (N, 3) float64, fragment-local, meters.
     params : voxel size and the rest of the plane-search settings.
+    max_voxels : when the voxels are more than this, the thinned cloud is thinned again with
+        voxels grown by the square root of the excess (a scan is a surface: its voxel count
+        falls with the voxel's area), so what follows costs about as much as that many.
     """
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    cloud = cloud.voxel_down_sample(params.voxel_size)
+    size = params.voxel_size
+    cloud = cloud.voxel_down_sample(size)
+    if max_voxels is not None and len(cloud.points) > max_voxels:
+        size *= float(np.sqrt(len(cloud.points) / max_voxels))
+        cloud = cloud.voxel_down_sample(size)
     if len(cloud.points) < 3:
         thin = np.asarray(cloud.points, dtype=np.float64).reshape(-1, 3)
         return OrientedCloud(thin, np.tile([0.0, 0.0, 1.0], (len(thin), 1)))
     cloud.estimate_normals(
-        o3d.geometry.KDTreeSearchParamHybrid(radius=_NORMAL_RADIUS * params.voxel_size, max_nn=24)
+        o3d.geometry.KDTreeSearchParamHybrid(radius=_NORMAL_RADIUS * size, max_nn=24)
     )
     return OrientedCloud(
         np.asarray(cloud.points, dtype=np.float64), np.asarray(cloud.normals, dtype=np.float64)

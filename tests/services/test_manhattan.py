@@ -93,3 +93,27 @@ def test_same_fragment_same_frame():
     for frame in frames[1:]:
         assert np.array_equal(frame.rotation, frames[0].rotation)
         assert frame.floor_z == frames[0].floor_z
+
+
+def test_a_voxel_cap_thins_a_wide_scan_coarser_and_keeps_its_normals():
+    rng = np.random.default_rng(1)
+    # A 6 x 6 m floor and a 6 x 2.5 m wall: about 21 000 voxels of 5 cm.
+    floor = np.column_stack(
+        [rng.uniform(0, 6, 200_000), rng.uniform(0, 6, 200_000), np.zeros(200_000)]
+    )
+    wall = np.column_stack(
+        [rng.uniform(0, 6, 80_000), np.zeros(80_000), rng.uniform(0, 2.5, 80_000)]
+    )
+    points = np.vstack([floor, wall])
+    whole = thin_with_normals(points, ManhattanParams())
+    capped = thin_with_normals(points, ManhattanParams(), max_voxels=8_000)
+    assert len(whole.points) > 15_000
+    assert 6_000 < len(capped.points) <= 8_000
+    # A cap the scan stays under changes nothing.
+    same = thin_with_normals(points, ManhattanParams(), max_voxels=len(whole.points))
+    np.testing.assert_array_equal(same.points, whole.points)
+    # Away from the edge where they meet (the normals' neighbourhood grows with the voxel):
+    on_floor = (capped.points[:, 2] < 0.01) & (capped.points[:, 1] > 0.5)
+    assert np.all(np.abs(capped.normals[on_floor, 2]) > 0.99)
+    on_wall = (capped.points[:, 1] < 0.01) & (capped.points[:, 2] > 0.5)
+    assert np.all(np.abs(capped.normals[on_wall, 1]) > 0.99)
