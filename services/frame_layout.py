@@ -20,6 +20,7 @@ import numpy as np
 from schemas.frames import IntrinsicsModel
 from schemas.params import PipelineParams
 from services.frustum import CameraView, in_any_view, side_rays, swept_cells, view_angle
+from services.geometry import unique_cells
 from services.local_layout import FOOTPRINT_CELL, boundary_points, footprint_cells
 from services.manhattan import estimate_manhattan_frame, thin_with_normals
 from services.rgbd import OPTICAL_TO_LEVEL, RgbdFrame, backproject
@@ -401,10 +402,9 @@ def estimate_frame_layout(
     report("chain", 0.7)
     chain = find_wall_chain(lines, params.layout, views)
     # What the frame saw empty: the cells holding its points and those its rays crossed.
-    footprint = np.unique(
-        np.vstack([footprint_cells(aligned), swept_cells(views, aligned[:, :2], FOOTPRINT_CELL)]),
-        axis=0,
-    )
+    seen = np.vstack([footprint_cells(aligned), swept_cells(views, aligned[:, :2], FOOTPRINT_CELL)])
+    cells, _ = unique_cells(np.floor(seen / FOOTPRINT_CELL).astype(np.int64))
+    footprint: FloatArray = ((cells + 0.5) * FOOTPRINT_CELL).astype(np.float64)
     across = view_angle(views)
     if chain is None or len(chain.keypoints) < 2:
         report("done", 1.0)

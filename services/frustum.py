@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from schemas.frames import IntrinsicsModel
+from services.geometry import unique_cells
 from services.types import FloatArray
 
 __all__ = [
@@ -233,6 +234,6 @@ def swept_cells(views: Sequence[CameraView], xy: FloatArray, cell: float) -> Flo
         along = np.stack([np.cos(bearing), np.sin(bearing)], axis=-1)
         samples = view.centre[:2] + steps[:, None, None] * along[None]
         cells.append(np.floor(samples[keep] / cell).astype(np.int64))
-    unique = np.unique(np.vstack(cells), axis=0)
+    unique, _ = unique_cells(np.vstack(cells))
     centres: FloatArray = ((unique + 0.5) * cell).astype(np.float64)
     return centres

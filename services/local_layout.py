@@ -8,7 +8,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from schemas.params import LayoutParams, PipelineParams
-from services.geometry import distance_to_chain
+from services.geometry import distance_to_chain, unique_cells
 from services.manhattan import estimate_manhattan_frame, thin_with_normals
 from services.types import Evidence, FloatArray, LocalLayout, ProgressFn
 from services.wall_graph import find_wall_chain
@@ -76,7 +76,7 @@ def footprint_cells(aligned: FloatArray, cell: float = FOOTPRINT_CELL) -> FloatA
     if len(aligned) == 0:
         return np.zeros((0, 2))
     ij = np.floor(aligned[:, :2] / cell).astype(np.int64)
-    cells, counts = np.unique(ij, axis=0, return_counts=True)
+    cells, counts = unique_cells(ij)
     centres: FloatArray = ((cells[counts >= _FOOTPRINT_MIN_POINTS] + 0.5) * cell).astype(np.float64)
     return centres
 

@@ -1,11 +1,17 @@
-"""Polygon helpers: inside test and distance to the boundary, checked against dense sampling."""
+"""Polygon helpers: inside test and distance to the boundary, checked against dense sampling;
+grid cells counted as numpy's row-wise unique counts them."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from services.geometry import distance_to_polygon, is_simple_rectilinear, points_in_polygon
+from services.geometry import (
+    distance_to_polygon,
+    is_simple_rectilinear,
+    points_in_polygon,
+    unique_cells,
+)
 
 L_ROOM = np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], dtype=np.float64)
 SLANTED = np.array([[0, 0], [6, 1], [5, 5], [1, 4]], dtype=np.float64)
@@ -47,3 +53,19 @@ def test_inside_test_on_an_l_shaped_room():
 )
 def test_is_simple_rectilinear(polygon, valid):
     assert is_simple_rectilinear(polygon) is valid
+
+
+@pytest.mark.parametrize("span", [3, 400, 2**31 - 1], ids=["dense", "floor plan", "extremes"])
+def test_unique_cells_are_numpys_row_wise_unique(span):
+    rng = np.random.default_rng(span)
+    cells = rng.integers(-span, span, size=(5000, 2), endpoint=True)
+    cells[:3] = [[-span, span], [span, -span], [-span, -span]]
+    rows, counts = unique_cells(cells)
+    expected_rows, expected_counts = np.unique(cells, axis=0, return_counts=True)
+    assert rows.dtype == np.int64 and counts.dtype == np.int64
+    assert np.array_equal(rows, expected_rows) and np.array_equal(counts, expected_counts)
+
+
+def test_unique_cells_of_nothing_is_empty():
+    rows, counts = unique_cells(np.zeros((0, 2), dtype=np.int64))
+    assert rows.shape == (0, 2) and counts.shape == (0,)
