@@ -31,6 +31,7 @@ _LINE_TOLERANCE = 0.05  # m, wall points kept around a line offset
 _MERGE_DISTANCE = 0.15  # m, parallel peaks closer than this are one wall
 _NEAR_STRIP = 0.12  # m, the strips skip the wall's own noisy band
 _FAR_STRIP = 1.0  # m, depth of the strips in front of and behind a wall
+_MIN_BEHIND = 0.5  # m, the shallowest strip a bridge is checked with (one camera)
 _BEHIND_RATIO = 0.3  # behind/front occupancy above which a cell is not a boundary
 _MAX_GAP_CELLS = 2  # low cells bridged inside one candidate segment
 _OCCLUSION_REACH = 3.0  # m, longest occluded stretch bridged between parallel walls
@@ -248,8 +249,11 @@ class _Grid:
     cell: float
     occupancy: NDArray[np.int64]  # (nx, ny) thinned horizontal-surface points per column
 
-    def strip_sums(self, axis: int, offset: float, cells: NDArray[np.int64]) -> FloatArray:
-        """Occupancy in the strips on the negative and positive side of a line, per cell.
+    def strip_sums(
+        self, axis: int, offset: float, cells: NDArray[np.int64], far: float = _FAR_STRIP
+    ) -> FloatArray:
+        """Occupancy in the strips on the negative and positive side of a line, per cell,
+        from ``_NEAR_STRIP`` to ``far`` meters off it.
 
         Returns (2, C): row 0 behind (lower offset), row 1 in front (higher offset).
         """
@@ -266,7 +270,7 @@ class _Grid:
             out[run_ok] = cum[cells[run_ok], j1] - cum[cells[run_ok], j0]
             return out
 
-        return np.vstack([band(-_FAR_STRIP, -_NEAR_STRIP), band(_NEAR_STRIP, _FAR_STRIP)])
+        return np.vstack([band(-far, -_NEAR_STRIP), band(_NEAR_STRIP, far)])
 
 
 def _make_grid(xy: FloatArray, cell: float, counted: NDArray[np.bool_]) -> _Grid:
@@ -472,11 +476,19 @@ def _lines_from_peak(
     return lines
 
 
-def _occluded_links(lines: list[WallLine], grid: _Grid) -> list[WallLine]:
+def _occluded_links(
+    lines: list[WallLine], grid: _Grid, camera: FloatArray | None = None
+) -> list[WallLine]:
     """Deduced walls joining misaligned parallel segments that face the same interior.
 
     Only where the deduced wall bounds the scanned space like a real one (nothing seen
     behind it): a bridge across observed floor would be a shortcut, not an occluded wall.
+
+    With one ``camera`` ((2,) its position on the floor plan, aligned frame) the hidden
+    stretch is the one the nearer wall's end casts on the farther wall (a step's side that
+    the camera saw would be a wall line of its own), so the bridge stands at the nearer
+    wall's end; and what lies behind it is looked for no deeper than the shorter of the two
+    walls' seen runs, so floor seen past a pillar's far side does not count against it.
     """
     cell = grid.cell
     deduced: list[WallLine] = []
@@ -486,16 +498,25 @@ def _occluded_links(lines: list[WallLine], grid: _Grid) -> list[WallLine]:
                 continue
             if not 2 * cell <= abs(a.offset - b.offset) <= _OCCLUSION_REACH:
                 continue  # a step too small to be a wall, or too long to be hidden
-            for end in a.segments[:, 1] if a.travel > 0 else a.segments[:, 0]:
-                for start in b.segments[:, 0] if a.travel > 0 else b.segments[:, 1]:
-                    ahead = (start - end) * a.travel
-                    if -2 * cell <= ahead <= _OCCLUSION_REACH:
-                        bridges = (_bridge(a, b, run) for run in (end, start))
-                        deduced.extend(
-                            br
-                            for br in bridges
-                            if _bounds_scan(br, grid) and not _explained(br, lines, cell)
-                        )
+            for seg_a in a.segments:
+                end = seg_a[1] if a.travel > 0 else seg_a[0]
+                for seg_b in b.segments:
+                    start = seg_b[0] if a.travel > 0 else seg_b[1]
+                    if not -2 * cell <= (start - end) * a.travel <= _OCCLUSION_REACH:
+                        continue
+                    runs: tuple[float, ...] = (end, start)
+                    depth = _FAR_STRIP
+                    if camera is not None:
+                        seen = camera[1 - a.axis]
+                        runs = (end,) if abs(a.offset - seen) < abs(b.offset - seen) else (start,)
+                        shorter = min(seg_a[1] - seg_a[0], seg_b[1] - seg_b[0])
+                        depth = float(np.clip(shorter, _MIN_BEHIND, _FAR_STRIP))
+                    bridges = (_bridge(a, b, run) for run in runs)
+                    deduced.extend(
+                        br
+                        for br in bridges
+                        if _bounds_scan(br, grid, depth) and not _explained(br, lines, cell)
+                    )
     return deduced
 
 
@@ -509,8 +530,9 @@ def _explained(bridge: WallLine, lines: list[WallLine], cell: float) -> bool:
     )
 
 
-def _bounds_scan(line: WallLine, grid: _Grid) -> bool:
-    """True when little was seen behind the (deduced) wall compared to in front of it."""
+def _bounds_scan(line: WallLine, grid: _Grid, depth: float = _FAR_STRIP) -> bool:
+    """True when little was seen behind the (deduced) wall compared to in front of it,
+    within ``depth`` meters of it."""
     run = line.origin + (np.arange(len(line.high)) + 0.5) * line.cell_size
     # Skip the ends: there the strips run along the walls the line joins, not past it.
     start, stop = line.origin, line.origin + len(line.high) * line.cell_size
@@ -518,7 +540,7 @@ def _bounds_scan(line: WallLine, grid: _Grid) -> bool:
     if len(run) == 0:
         return True
     cells = np.floor((run - grid.origin[line.axis]) / grid.cell).astype(np.int64)
-    behind, front = grid.strip_sums(line.axis, line.offset, cells)
+    behind, front = grid.strip_sums(line.axis, line.offset, cells, depth)
     interior = line.travel if line.axis == 0 else -line.travel
     near, far = (front, behind) if interior > 0 else (behind, front)
     return bool(far.sum() <= _BEHIND_RATIO * max(float(near.sum()), float(len(cells))))
@@ -605,7 +627,8 @@ def find_wall_lines(
             lines += _lines_from_peak(axis, offset, members, grid, rule, params, flat_xy)
     if views:
         lines = _facing_cameras(lines, views, params)
-    return lines + _occluded_links(lines, grid)
+    camera = views[0].centre[:2] if len(views) == 1 else None
+    return lines + _occluded_links(lines, grid, camera)
 
 
 def _interior_sign(line: WallLine) -> int:

@@ -146,3 +146,24 @@ def test_a_frames_seen_space_reaches_back_to_its_camera() -> None:
     near_camera = np.linalg.norm(layout.footprint, axis=1) < 0.5  # the camera is at 0
     assert near_camera.any()
     assert (np.linalg.norm(footprint_cells(aligned), axis=1) >= 0.5).all()
+
+
+@pytest.mark.parametrize(("camera_y", "depth"), [(2.0, 0.9), (2.1, 1.0), (1.95, 0.8)])
+def test_a_pillar_seen_face_on_with_both_sides_hidden_stays_in_the_chain(
+    camera_y: float, depth: float
+) -> None:
+    # A full-height box stands out of the wall x = 0 (y 2.05 to 2.85): the camera faces it
+    # with its lower side edge-on and its upper side turned away, so the chain must bridge
+    # both sides from where the front face ends. The floor seen past the box's far side
+    # once made that bridge look like a shortcut across seen space.
+    low, high = 2.05, 2.85
+    polygon = [[0, 0], [6, 0], [6, 5], [0, 5], [0, high], [depth, high], [depth, low], [0, low]]
+    room = Room.from_polygon(np.array(polygon, dtype=np.float64), 2.6)
+    stance = {"f": ((3.3, camera_y, 1.3), 180.0, -8.0)}
+    frame, pose = render_views(room, Furnishing(), stance)["f"]
+    layout = estimate_rgbd_layout(frame)
+    assert layout.ok
+    world = (layout.keypoints_local() @ pose[:3, :3].T + pose[:3, 3])[:, :2]
+    corners = np.array([[0.0, high], [depth, high], [depth, low], [0.0, low]])
+    off = np.linalg.norm(world[:, None, :] - corners[None], axis=2).min(axis=0)
+    assert (off < 0.15).all(), np.round(world, 2).tolist()
