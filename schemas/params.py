@@ -227,14 +227,14 @@ class PlacementParams(_Frozen):
         "conflict, its hidden corners, search truncated); (0, 1, 0, ...) is the share itself",
     )
     frame_calibration: tuple[float, float] = Field(
-        (-0.736, 0.472),
+        (-0.755, 0.475),
         description="(bias, slope) mapping the main room's calibrated logit z to a + b z when "
         "its pieces are RGB-D frames (a share of the pieces: that share of the change): a "
         "frame's chain is wrong more often than a cloud's (bench/rgbd_frames.py --fit, tune "
         "seeds); (0, 1) leaves frames as clouds",
     )
     frame_view_slope: float = Field(
-        -1.101,
+        -0.858,
         description="change of that logit per radian the frames see across beyond the "
         "kinect's 63 degrees (a wider camera's chains are right more often, but its rooms "
         "reach higher logits still; bench/rgbd_frames.py --fit over several cameras)",
