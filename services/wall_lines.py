@@ -250,10 +250,10 @@ class _Grid:
     occupancy: NDArray[np.int64]  # (nx, ny) thinned horizontal-surface points per column
 
     def strip_sums(
-        self, axis: int, offset: float, cells: NDArray[np.int64], far: float = _FAR_STRIP
+        self, axis: int, offset: float, cells: NDArray[np.int64], depth: float = _FAR_STRIP
     ) -> FloatArray:
         """Occupancy in the strips on the negative and positive side of a line, per cell,
-        from ``_NEAR_STRIP`` to ``far`` meters off it.
+        from ``_NEAR_STRIP`` to ``depth`` meters off it.
 
         Returns (2, C): row 0 behind (lower offset), row 1 in front (higher offset).
         """
@@ -270,7 +270,7 @@ class _Grid:
             out[run_ok] = cum[cells[run_ok], j1] - cum[cells[run_ok], j0]
             return out
 
-        return np.vstack([band(-far, -_NEAR_STRIP), band(_NEAR_STRIP, far)])
+        return np.vstack([band(-depth, -_NEAR_STRIP), band(_NEAR_STRIP, depth)])
 
 
 def _make_grid(xy: FloatArray, cell: float, counted: NDArray[np.bool_]) -> _Grid:
@@ -498,6 +498,9 @@ def _occluded_links(
                 continue
             if not 2 * cell <= abs(a.offset - b.offset) <= _OCCLUSION_REACH:
                 continue  # a step too small to be a wall, or too long to be hidden
+            if camera is not None:
+                seen = camera[1 - a.axis]
+                a_nearer = abs(a.offset - seen) < abs(b.offset - seen)
             for seg_a in a.segments:
                 end = seg_a[1] if a.travel > 0 else seg_a[0]
                 for seg_b in b.segments:
@@ -507,8 +510,7 @@ def _occluded_links(
                     runs: tuple[float, ...] = (end, start)
                     depth = _FAR_STRIP
                     if camera is not None:
-                        seen = camera[1 - a.axis]
-                        runs = (end,) if abs(a.offset - seen) < abs(b.offset - seen) else (start,)
+                        runs = (end,) if a_nearer else (start,)
                         shorter = min(seg_a[1] - seg_a[0], seg_b[1] - seg_b[0])
                         depth = float(np.clip(shorter, _MIN_BEHIND, _FAR_STRIP))
                     bridges = (_bridge(a, b, run) for run in runs)
