@@ -19,13 +19,23 @@ from dataclasses import dataclass
 import numpy as np
 import open3d as o3d
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 from schemas.params import ManhattanParams
 from services.types import FloatArray, ManhattanFrame
 
-__all__ = ["OrientedCloud", "estimate_manhattan_frame", "thin_with_normals"]
+__all__ = ["OrientedCloud", "estimate_manhattan_frame", "point_spacing", "thin_with_normals"]
 
 _NORMAL_RADIUS = 3.0  # neighbourhood radius for normals, in voxel sizes
+# ... and at least this many times the thinned cloud's point spacing: a sparse scanner's
+# points lie further apart than the voxels, and a point with fewer than two neighbours in
+# the radius gets no normal of its own (open3d leaves it pointing up, i.e. floor).
+_SPACING_RADIUS = 2.5
+_SPACING_SAMPLE = 2_000  # points whose nearest neighbour measures the spacing
+# Thinning that kept more than this share of the points left most voxels with one point:
+# only then can the points lie further apart than the voxels (a dense scan or an RGB-D
+# frame keeps a third or less, and skips the measurement).
+_SPARSE_SHARE = 0.5
 _RANSAC_CHUNK = 64  # candidate planes scored per matrix product (bounds memory)
 _SHARPEN_POINTS = 12_000  # points used by the fine tilt and yaw search
 _DEGENERATE_GAP = 0.05  # up is ambiguous when its scatter eigenvalue leads by less than this
@@ -46,7 +56,8 @@ class OrientedCloud:
 def thin_with_normals(
     points: FloatArray, params: ManhattanParams, max_voxels: int | None = None
 ) -> OrientedCloud:
-    """Thin to one point per voxel and estimate a normal for each.
+    """Thin to one point per voxel and estimate a normal for each, from the neighbours
+    within three voxels, or within 2.5 point spacings where the scan is sparser than that.
 
     Parameters
     ----------
@@ -65,12 +76,21 @@ def thin_with_normals(
     if len(cloud.points) < 3:
         thin = np.asarray(cloud.points, dtype=np.float64).reshape(-1, 3)
         return OrientedCloud(thin, np.tile([0.0, 0.0, 1.0], (len(thin), 1)))
-    cloud.estimate_normals(
-        o3d.geometry.KDTreeSearchParamHybrid(radius=_NORMAL_RADIUS * size, max_nn=24)
-    )
-    return OrientedCloud(
-        np.asarray(cloud.points, dtype=np.float64), np.asarray(cloud.normals, dtype=np.float64)
-    )
+    thinned = np.asarray(cloud.points, dtype=np.float64)
+    spacing = point_spacing(thinned) if len(thinned) > _SPARSE_SHARE * len(points) else 0.0
+    radius = max(_NORMAL_RADIUS * size, _SPACING_RADIUS * spacing)
+    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=24))
+    return OrientedCloud(thinned, np.asarray(cloud.normals, dtype=np.float64))
+
+
+def point_spacing(points: FloatArray) -> float:
+    """Median distance from a point to its nearest neighbour, over an even sample of at
+    most ``_SPACING_SAMPLE`` points (0 for fewer than two points)."""
+    if len(points) < 2:
+        return 0.0
+    sample = points[:: max(1, len(points) // _SPACING_SAMPLE)]
+    distances, _ = cKDTree(points).query(sample, k=2)
+    return float(np.median(distances[:, 1]))
 
 
 def _floor_plane_normal(cloud: OrientedCloud, params: ManhattanParams) -> FloatArray | None:
