@@ -34,6 +34,7 @@ _ON_CHAIN = 0.3
 _UNDER_CEILING = 0.12
 _UNDER_CEILING_POINTS = 3  # of them within a cell's reach: a stray point is no wall
 _VERTICAL = 0.5  # |normal z| under this: a point of a vertical surface
+_CELL_SPACINGS = 1.5  # a grid cell spans at least this many point spacings (sparse scans)
 
 
 def boundary_points(
@@ -151,9 +152,14 @@ def estimate_local_layout(
     aligned = cloud.points @ frame.rotation.T
     normals = cloud.normals @ frame.rotation.T
     report("walls", 0.4)
-    lines = find_wall_lines(aligned, normals, frame.floor_z, frame.ceiling_z, params.layout)
+    # A thin cloud's walls are read on cells wide enough to hold a few of its points each:
+    # on 8 cm cells a wall 10 cm between points breaks into short runs.
+    on_grid = params.layout
+    if _CELL_SPACINGS * cloud.spacing > on_grid.cell_size:
+        on_grid = on_grid.model_copy(update={"cell_size": _CELL_SPACINGS * cloud.spacing})
+    lines = find_wall_lines(aligned, normals, frame.floor_z, frame.ceiling_z, on_grid)
     report("chain", 0.7)
-    chain = find_wall_chain(lines, params.layout)
+    chain = find_wall_chain(lines, on_grid)
     if chain is None or len(chain.keypoints) < 2:
         report("done", 1.0)
         return LocalLayout(
@@ -172,7 +178,7 @@ def estimate_local_layout(
         footprint=footprint_cells(aligned),
         evidence=evidence,
         unchained_walls=unchained_walls(
-            lines, kp, wall_points_under_ceiling(aligned, normals, frame.ceiling_z), params.layout
+            lines, kp, wall_points_under_ceiling(aligned, normals, frame.ceiling_z), on_grid
         ),
     )
     report("done", 1.0)

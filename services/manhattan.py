@@ -47,10 +47,13 @@ class OrientedCloud:
     """A thinned cloud with unit normals.
 
     points, normals: (M, 3) float64, fragment-local frame.
+    spacing: median distance between neighbouring points, meters, where the scan may be
+    sparser than the voxels (0 where it was not measured: a dense scan).
     """
 
     points: FloatArray
     normals: FloatArray
+    spacing: float = 0.0
 
 
 def thin_with_normals(
@@ -80,7 +83,7 @@ def thin_with_normals(
     spacing = point_spacing(thinned) if len(thinned) > _SPARSE_SHARE * len(points) else 0.0
     radius = max(_NORMAL_RADIUS * size, _SPACING_RADIUS * spacing)
     cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=24))
-    return OrientedCloud(thinned, np.asarray(cloud.normals, dtype=np.float64))
+    return OrientedCloud(thinned, np.asarray(cloud.normals, dtype=np.float64), spacing)
 
 
 def point_spacing(points: FloatArray) -> float:

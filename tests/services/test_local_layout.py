@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 
 import numpy as np
@@ -15,6 +16,7 @@ from services.local_layout import (
     footprint_cells,
     unchained_walls,
 )
+from services.synthetic.scene import SceneSpec, generate_scene
 from services.wall_lines import WallLine
 from tests.conftest import small_scene
 
@@ -103,6 +105,20 @@ def test_a_cloud_thinner_than_the_calibrations_is_a_thin_cloud():
     assert estimate_local_layout(thin).evidence == "thin_cloud"
     trusting = PipelineParams(layout=LayoutParams(min_calibrated_points=0))
     assert estimate_local_layout(thin, trusting).evidence == "cloud"
+
+
+def test_a_thin_cloud_of_a_large_room_is_read_on_cells_as_wide_as_its_points_lie_apart():
+    # 13 500 points over a 22 m room: 9-10 cm apart, so an 8 cm column of a wall holds a
+    # few points at most and its run broke into short pieces (the chain was 3.4 m off).
+    spec = dataclasses.replace(
+        SceneSpec.world(), n_fragments_range=(2, 3), points_per_fragment=(8_000, 15_000)
+    )
+    fragment = generate_scene(spec, 7001).fragments[0]
+    layout = estimate_local_layout(fragment.points)
+    assert layout.evidence == "thin_cloud"
+    assert local_layout_correct(
+        layout.keypoints_local(), fragment.keypoints_local, fragment.diagonal
+    )
 
 
 def _high_line(axis: int, offset: float, start: float, stop: float) -> WallLine:
