@@ -553,6 +553,8 @@ def place_site(
         poses the result is in the hints' frame.
     """
     report = progress or (lambda stage, fraction: None)
+    # The search breaks near-ties on the layouts' last bits, which differ between machines.
+    layouts = {fid: lay.snapped() for fid, lay in layouts.items()}
     fragments = {
         fid: FragmentResultModel(
             id=fid,

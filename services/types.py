@@ -6,8 +6,9 @@ frame (z up, walls along x or y, same origin as local); *site* is the common out
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,6 +26,35 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 ProgressFn = Callable[[str, float], None]  # (stage, fraction done) for long work
+
+# Grids a layout is snapped to before placement, in decimal places: 1 um for lengths, 1e-9
+# for rotation entries and angles. Far below any sensor's noise, far above the last bits in
+# which two machines' BLAS kernels (AVX-512 or not) compute the same layout.
+_LENGTH_DECIMALS = 6
+_UNIT_DECIMALS = 9
+
+
+def _snap(value: FloatArray, decimals: int = _LENGTH_DECIMALS) -> FloatArray:
+    return np.asarray(np.round(np.asarray(value, dtype=np.float64), decimals), dtype=np.float64)
+
+
+def _snap_scalar(value: float | None, decimals: int = _LENGTH_DECIMALS) -> float | None:
+    return None if value is None else round(float(value), decimals)
+
+
+def _snap_rotation(rotation: FloatArray) -> FloatArray:
+    """``rotation`` snapped, then made orthonormal again (up row kept, first wall row made
+    square to it, second their cross product) in plain float arithmetic: no BLAS, so the
+    same bits on any machine."""
+    (ax, ay, az), _, (ux, uy, uz) = _snap(rotation, _UNIT_DECIMALS).tolist()
+    norm = math.sqrt(ux * ux + uy * uy + uz * uz)
+    ux, uy, uz = ux / norm, uy / norm, uz / norm
+    along = ax * ux + ay * uy + az * uz
+    ax, ay, az = ax - along * ux, ay - along * uy, az - along * uz
+    norm = math.sqrt(ax * ax + ay * ay + az * az)
+    ax, ay, az = ax / norm, ay / norm, az / norm
+    across = [uy * az - uz * ay, uz * ax - ux * az, ux * ay - uy * ax]
+    return np.array([[ax, ay, az], across, [ux, uy, uz]])
 
 
 @dataclass(frozen=True)
@@ -53,6 +83,16 @@ class ManhattanFrame:
     ceiling_z: float | None
     n_planes: int = 0
     wall_support: float = 0.0
+
+    def snapped(self) -> ManhattanFrame:
+        """The frame with its rotation and heights on fixed grids (see ``LocalLayout.snapped``)."""
+        return replace(
+            self,
+            rotation=_snap_rotation(self.rotation),
+            floor_z=round(float(self.floor_z), _LENGTH_DECIMALS),
+            ceiling_z=_snap_scalar(self.ceiling_z),
+            wall_support=round(float(self.wall_support), _UNIT_DECIMALS),
+        )
 
 
 @dataclass(frozen=True)
@@ -92,6 +132,24 @@ class LocalLayout:
     def ok(self) -> bool:
         """True when at least one wall was found."""
         return len(self.keypoints) >= 2
+
+    def snapped(self) -> LocalLayout:
+        """The layout with every coordinate on a 1 um grid and its rotation on a 1e-9 grid.
+
+        Two machines estimate the same scan's layout alike up to the last bits (their BLAS
+        kernels sum in other orders), and the placement search breaks near-ties on such bits.
+        Placed snapped, the same layouts give the same room on any machine.
+        """
+        return replace(
+            self,
+            keypoints=_snap(self.keypoints),
+            frame=self.frame.snapped(),
+            source_boundary=_snap(self.source_boundary),
+            target_boundary=_snap(self.target_boundary),
+            footprint=_snap(self.footprint),
+            unchained_walls=_snap(self.unchained_walls),
+            view_angle=_snap_scalar(self.view_angle, _UNIT_DECIMALS),
+        )
 
     def keypoints_local(self) -> FloatArray:
         """(K, 3) keypoints in the fragment-local frame, at floor height."""

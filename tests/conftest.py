@@ -82,6 +82,33 @@ def scene_layouts(
     return dict(_small_scene_layouts(preset, seed, points))
 
 
+def off_in_last_bits(layout: LocalLayout, seed: int) -> LocalLayout:
+    """The layout as another machine's BLAS might give it: every float a few ulps away."""
+    rng = np.random.default_rng(seed)
+
+    def nudge(values: np.ndarray) -> np.ndarray:
+        values = np.asarray(values, dtype=np.float64)
+        steps = rng.integers(-3, 4, values.shape)
+        toward = np.where(steps > 0, np.inf, -np.inf)
+        out = values.copy()
+        for step in range(3):  # up to three ulps either way
+            out = np.where(np.abs(steps) > step, np.nextafter(out, toward), out)
+        return out
+
+    frame = dataclasses.replace(
+        layout.frame,
+        rotation=nudge(layout.frame.rotation),
+        floor_z=float(nudge(np.array(layout.frame.floor_z))),
+    )
+    return dataclasses.replace(
+        layout,
+        keypoints=nudge(layout.keypoints),
+        frame=frame,
+        source_boundary=nudge(layout.source_boundary),
+        target_boundary=nudge(layout.target_boundary),
+    )
+
+
 @pytest.fixture(scope="session")
 def easy_scene() -> SyntheticScene:
     """The easy preset's scene of seed 0 at full density (what the service tests upload),
