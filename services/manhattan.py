@@ -24,7 +24,13 @@ from scipy.spatial import cKDTree
 from schemas.params import ManhattanParams
 from services.types import FloatArray, ManhattanFrame
 
-__all__ = ["OrientedCloud", "estimate_manhattan_frame", "point_spacing", "thin_with_normals"]
+__all__ = [
+    "OrientedCloud",
+    "estimate_manhattan_frame",
+    "point_spacing",
+    "thin_with_normals",
+    "voxel_thin",
+]
 
 _NORMAL_RADIUS = 3.0  # neighbourhood radius for normals, in voxel sizes
 # ... and at least this many times the thinned cloud's point spacing: a sparse scanner's
@@ -70,20 +76,39 @@ def thin_with_normals(
         voxels grown by the square root of the excess (a scan is a surface: its voxel count
         falls with the voxel's area), so what follows costs about as much as that many.
     """
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
     size = params.voxel_size
-    cloud = cloud.voxel_down_sample(size)
-    if max_voxels is not None and len(cloud.points) > max_voxels:
-        size *= float(np.sqrt(len(cloud.points) / max_voxels))
-        cloud = cloud.voxel_down_sample(size)
-    if len(cloud.points) < 3:
-        thin = np.asarray(cloud.points, dtype=np.float64).reshape(-1, 3)
-        return OrientedCloud(thin, np.tile([0.0, 0.0, 1.0], (len(thin), 1)))
-    thinned = np.asarray(cloud.points, dtype=np.float64)
+    thinned = voxel_thin(points, size)
+    if max_voxels is not None and len(thinned) > max_voxels:
+        size *= float(np.sqrt(len(thinned) / max_voxels))
+        thinned = voxel_thin(thinned, size)
+    if len(thinned) < 3:
+        return OrientedCloud(thinned, np.tile([0.0, 0.0, 1.0], (len(thinned), 1)))
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(thinned))
     spacing = point_spacing(thinned) if len(thinned) > _SPARSE_SHARE * len(points) else 0.0
     radius = max(_NORMAL_RADIUS * size, _SPACING_RADIUS * spacing)
     cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=24))
     return OrientedCloud(thinned, np.asarray(cloud.normals, dtype=np.float64), spacing)
+
+
+def voxel_thin(points: FloatArray, size: float) -> FloatArray:
+    """The mean of the points in each occupied voxel of a ``size`` grid, in the voxels' order.
+
+    The order is the grid's, not the input's: the plane search samples the thinned points by
+    index, so the same scan in another point order (another file format, another driver)
+    gives the same frame. Voxels as open3d's ``voxel_down_sample`` draws them.
+    """
+    if len(points) == 0:
+        return np.zeros((0, 3))
+    origin = points.min(axis=0) - 0.5 * size
+    cells = np.floor((points - origin) / size).astype(np.int64)
+    extent = cells.max(axis=0) + 1
+    keys = (cells[:, 0] * extent[1] + cells[:, 1]) * extent[2] + cells[:, 2]
+    _, voxel, counts = np.unique(keys, return_inverse=True, return_counts=True)
+    sums = np.column_stack(
+        [np.bincount(voxel, weights=points[:, axis], minlength=len(counts)) for axis in range(3)]
+    )
+    thinned: FloatArray = sums / counts[:, None]
+    return thinned
 
 
 def point_spacing(points: FloatArray) -> float:

@@ -15,6 +15,7 @@ import open3d as o3d
 from scipy.spatial import cKDTree
 
 from schemas.params import RegistrationParams
+from services.manhattan import voxel_thin
 from services.types import FloatArray
 
 __all__ = [
@@ -86,8 +87,8 @@ class _Prepared:
 
 def _prepare(points: FloatArray, p: RegistrationParams) -> _Prepared:
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, np.float64)))
-    down = pcd.voxel_down_sample(p.voxel_size)
+    thinned = voxel_thin(np.asarray(points, np.float64), p.voxel_size)
+    down = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(thinned))
     if (n := len(down.points)) < _MIN_POINTS:
         return _Prepared(down, _reg.Feature(), n)
     hybrid = o3d.geometry.KDTreeSearchParamHybrid
@@ -209,9 +210,7 @@ def _merge(
         return MergedGroup(anchor, (anchor,), transforms, np.asarray(clouds[anchor]))
     union = np.concatenate([clouds[m] @ T[:3, :3].T + T[:3, 3] for m, T in transforms.items()])
     voxel = p.merge_voxel_size or max(_median_spacing([clouds[m] for m in members]), 1e-3)
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(union))
-    thinned = np.asarray(pcd.voxel_down_sample(voxel).points, dtype=np.float64)
-    return MergedGroup(anchor, tuple(members), transforms, thinned)
+    return MergedGroup(anchor, tuple(members), transforms, voxel_thin(union, voxel))
 
 
 def premerge(

@@ -299,7 +299,9 @@ def _most_wall_path(
             options[:, arrival + 1] = np.where(blocked, -np.inf, extend)
         choice = np.argmax(options, axis=1)
         candidate = options[edges, choice] + gain
-        order = np.argsort(candidate)  # ascending: the best candidate per state lands last
+        # Ascending: the best candidate per state lands last. Stable: among equal ones the
+        # last edge, on any machine (numpy's default sort orders ties by its SIMD level).
+        order = np.argsort(candidate, kind="stable")
         best = np.full(2 * n, -np.inf)
         best[head_state[order]] = candidate[order]
         edge_of = np.full(2 * n, -1)

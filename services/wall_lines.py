@@ -198,7 +198,7 @@ def _offset_peaks(offsets: FloatArray, min_support: float) -> FloatArray:
     kernel = np.exp(-0.5 * (np.arange(-4, 5) / 1.5) ** 2)
     window = np.convolve(hist, np.ones(2 * round(_LINE_TOLERANCE / _HIST_BIN) + 1), mode="same")
     smooth = np.convolve(hist, kernel, mode="same")
-    order = np.argsort(-smooth)
+    order = np.argsort(-smooth, kind="stable")  # equal peaks in offset order on any machine
     peaks: list[float] = []
     # A peak needs points near it, however low the support asked for.
     for idx in order[window[order] >= max(min_support, 1.0)]:

@@ -92,7 +92,9 @@ def sample_scan(
         return points
     # Weighted sampling without replacement (exponential keys, Efraimidis-Spirakis).
     keys = rng.standard_exponential(len(points)) / weights
-    return points[np.argpartition(keys, n_points - 1)[:n_points]]
+    # In index order: argpartition's own order depends on numpy's SIMD level, and the noise
+    # is drawn per point in this order.
+    return points[np.sort(np.argpartition(keys, n_points - 1)[:n_points])]
 
 
 def _candidates(

@@ -507,7 +507,9 @@ def _fragment(
     on_floor = np.column_stack([keypoints, np.zeros(len(keypoints))])
     return SyntheticFragment(
         id=fragment_id,
-        points=(world - shift) @ rotation,  # row-wise R^T (p - t): world -> local
+        # Row-wise R^T (p - t), world -> local, snapped to 1 um: BLAS computes the product
+        # in other last bits on other machines, and the same seed must give the same scan.
+        points=np.round((world - shift) @ rotation, 6),
         pose=pose,
         keypoints_world=keypoints,
         keypoints_local=(on_floor - shift) @ rotation,

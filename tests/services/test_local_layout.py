@@ -108,12 +108,13 @@ def test_a_cloud_thinner_than_the_calibrations_is_a_thin_cloud():
 
 
 def test_a_thin_cloud_of_a_large_room_is_read_on_cells_as_wide_as_its_points_lie_apart():
-    # 13 500 points over a 22 m room: 9-10 cm apart, so an 8 cm column of a wall holds a
-    # few points at most and its run broke into short pieces (the chain was 3.4 m off).
+    # 8 600 points over a 17 m room, 8 cm apart, so an 8 cm column of a wall holds a
+    # few points at most and its run broke into short pieces (the chain was 3.0 m off; 5 %
+    # of the fragment's diagonal is 0.85 m, and the wider cells leave it 0.28 m off).
     spec = dataclasses.replace(
         SceneSpec.world(), n_fragments_range=(2, 3), points_per_fragment=(8_000, 15_000)
     )
-    fragment = generate_scene(spec, 7001).fragments[0]
+    fragment = generate_scene(spec, 7018).fragments[1]
     layout = estimate_local_layout(fragment.points)
     assert layout.evidence == "thin_cloud"
     assert local_layout_correct(

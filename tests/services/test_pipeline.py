@@ -3,8 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
+import importlib
+import json
 import math
-from typing import get_args
+import os
+import platform
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any, get_args
 
 import numpy as np
 import pytest
@@ -87,6 +94,61 @@ def test_layouts_that_differ_in_their_last_bits_give_the_same_result_bit_for_bit
     elsewhere = {fid: off_in_last_bits(lay, i) for i, (fid, lay) in enumerate(layouts.items())}
     here = place_site(layouts).model_dump(mode="json")
     assert place_site(elsewhere).model_dump(mode="json") == here
+
+
+# A scene generated, laid out and placed in a process of its own; prints the result and a
+# digest of the layouts as estimated (before placement snaps them).
+_ALIGN_IN_A_PROCESS = """
+import dataclasses, hashlib, json
+from services.pipeline import estimate_layout, place_site
+from services.synthetic import SceneSpec, generate_scene
+spec = dataclasses.replace(SceneSpec.paper(), points_per_fragment=(30_000, 40_000))
+layouts = {f.id: estimate_layout(f.points) for f in generate_scene(spec, 5).fragments}
+digest = hashlib.sha256()
+for lay in layouts.values():
+    digest.update(lay.keypoints.tobytes() + lay.frame.rotation.tobytes())
+result = place_site(layouts).model_dump(mode="json")
+print(json.dumps({"layouts": digest.hexdigest(), "result": result}))
+"""
+
+
+def _align_elsewhere(env: dict[str, str]) -> dict[str, Any]:
+    root = Path(__file__).resolve().parents[2]
+    done = subprocess.run(
+        [sys.executable, "-c", _ALIGN_IN_A_PROCESS],
+        cwd=root,
+        env={**os.environ, "PYTHONPATH": str(root), **env},
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    answer: dict[str, Any] = json.loads(done.stdout)
+    return answer
+
+
+@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="x86 BLAS kernels")
+def test_a_machine_of_older_simd_gives_the_same_result():
+    # Another machine emulated: OpenBLAS's SSE3 kernels, numpy without its dispatched SIMD.
+    simd = importlib.import_module(
+        "numpy._core._multiarray_umath" if hasattr(np, "_core") else "numpy.core._multiarray_umath"
+    )
+    dispatched = [f for f in simd.__cpu_dispatch__ if simd.__cpu_features__[f]]
+    older = {"OPENBLAS_CORETYPE": "Prescott", "NPY_DISABLE_CPU_FEATURES": ",".join(dispatched)}
+    here, there = _align_elsewhere({}), _align_elsewhere(older)
+    assert there["layouts"] != here["layouts"], "the same bits: the emulation proves nothing"
+    # The same room; the numbers alike but for the last bits of BLAS products after placement.
+    assert _rounded(there["result"]) == _rounded(here["result"])
+    assert here["result"]["status"] == "closed"
+
+
+def _rounded(value: Any, decimals: int = 9) -> Any:
+    if isinstance(value, float):
+        return round(value, decimals)
+    if isinstance(value, list):
+        return [_rounded(v, decimals) for v in value]
+    if isinstance(value, dict):
+        return {k: _rounded(v, decimals) for k, v in value.items()}
+    return value
 
 
 def test_floor_is_at_zero_in_the_site_frame():

@@ -230,15 +230,21 @@ ACROSS = replace(
 L_OUTLINE = np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], dtype=np.float64)
 
 
+# A noise-free point lies this close to its surface: fragments' points are snapped to 1 um
+# in their own frame, so in the world's they are off by up to about 1 um.
+_ON_SURFACE = 1e-5
+
+
 def explained(points: FloatArray, scene: SyntheticScene) -> BoolArray:
     """(N,) True for noise-free points on the room's structure, reveals or furniture."""
     room = Room.from_polygon(scene.polygon, scene.ceiling_z)
     distance, _ = nearest_boundary(points[:, :2], room)
     z = points[:, 2]
-    known = (np.abs(z) < 1e-9) | (np.abs(z - scene.ceiling_z) < 1e-9) | (distance < 1e-9)
+    on = _ON_SURFACE
+    known = (np.abs(z) < on) | (np.abs(z - scene.ceiling_z) < on) | (distance < on)
     known |= ~points_in_polygon(points[:, :2], scene.polygon) & (distance < 0.26)
     for box in scene.furnishing.boxes:
-        known |= np.all((points >= box.lo - 1e-9) & (points <= box.hi + 1e-9), axis=1)
+        known |= np.all((points >= box.lo - on) & (points <= box.hi + on), axis=1)
     return known
 
 
@@ -291,8 +297,8 @@ def test_neighbours_that_overlap_see_the_same_wall_and_floor():
                 p = world_points(f)
                 distance, arc = nearest_boundary(p[:, :2], room)
                 inside = np.mod(arc - start, room.perimeter) < -junction.gap
-                wall = inside & (distance < 1e-9) & (p[:, 2] > 0.1)
-                floor = inside & (distance > 0.05) & (np.abs(p[:, 2]) < 1e-9)
+                wall = inside & (distance < _ON_SURFACE) & (p[:, 2] > 0.1)
+                floor = inside & (distance > 0.05) & (np.abs(p[:, 2]) < _ON_SURFACE)
                 assert np.count_nonzero(wall) >= 5 and np.count_nonzero(floor) >= 3
             checked += 1
     assert checked >= 3
