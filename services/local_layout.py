@@ -157,7 +157,9 @@ def estimate_local_layout(
     on_grid = params.layout
     if _CELL_SPACINGS * cloud.spacing > on_grid.cell_size:
         on_grid = on_grid.model_copy(update={"cell_size": _CELL_SPACINGS * cloud.spacing})
-    lines = find_wall_lines(aligned, normals, frame.floor_z, frame.ceiling_z, on_grid)
+    lines = find_wall_lines(
+        aligned, normals, frame.floor_z, frame.ceiling_z, on_grid, thin=evidence == "thin_cloud"
+    )
     report("chain", 0.7)
     chain = find_wall_chain(lines, on_grid)
     if chain is None or len(chain.keypoints) < 2:

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.ndimage import maximum_filter1d
 
 from schemas.params import LayoutParams
 from services.frustum import CameraView, visible_band
@@ -36,7 +37,13 @@ _BEHIND_RATIO = 0.3  # behind/front occupancy above which a cell is not a bounda
 _MAX_GAP_CELLS = 2  # low cells bridged inside one candidate segment
 _OCCLUSION_REACH = 3.0  # m, longest occluded stretch bridged between parallel walls
 _SUPPORT_POINTS = 3  # interior-strip points that show the line's cell borders scanned space
-_TOP_REACH = 0.85  # share of the floor-to-ceiling band a wall column must reach
+# Share of the floor-to-ceiling band a wall column must reach: walls meet the ceiling, a
+# wardrobe stops 0.2-0.5 m short of it (at 0.85 its side became a wall at a scan's end).
+_TOP_REACH = 0.95
+# A thin scan's column may show that reach by a point of its own or of a column this many
+# cells along the line: its few points leave most columns short of the top, while a
+# wardrobe's columns all stop short. (Dense scans without it: fewer wrong chains.)
+_THIN_REACH_CELLS = 2
 _MIN_VISIBLE = 0.5  # m, least height of a column a camera must see to judge it
 _AXIS_COS = float(np.cos(np.radians(25.0)))  # a normal within 25 deg of an axis faces along it
 # m, widest doorway: a gap in a wall read as a door here, and the longest stretch a wall may
@@ -338,7 +345,8 @@ class _Horizon:
 @dataclass(frozen=True)
 class _TallRule:
     """When a cell's column counts as standing wall: N height bins, reaching the top part
-    of the floor-to-ceiling band (furniture stops lower; walls reach the ceiling).
+    of the floor-to-ceiling band (furniture stops lower; walls reach the ceiling), itself
+    or through a column up to ``reach_cells`` along the line.
 
     With camera views (an RGB-D frame), both are measured against the part of the column
     the cameras saw: a wall near the camera shows only its lower part, and a wall behind a
@@ -352,6 +360,7 @@ class _TallRule:
     top_z: float = np.inf
     views: tuple[CameraView, ...] = ()
     horizon: _Horizon | None = None
+    reach_cells: int = 0
 
     def per_cell(self, xy: FloatArray, cell: float) -> tuple[FloatArray, FloatArray]:
         """(C,) least height bins and (C,) least top bin of the columns at ``xy`` (C, 2)."""
@@ -431,7 +440,8 @@ def _lines_from_peak(
     run = origin + (np.arange(n_cells) + 0.5) * s
     xy = np.column_stack([run, np.full(n_cells, offset)])
     least_n, least_top = rule.per_cell(xy if axis == 0 else xy[:, ::-1], s)
-    tall = (np.bincount(keys // 4096, minlength=n_cells) >= least_n) & (reach >= least_top)
+    near_reach = maximum_filter1d(reach, 2 * rule.reach_cells + 1, mode="constant", cval=0)
+    tall = (np.bincount(keys // 4096, minlength=n_cells) >= least_n) & (near_reach >= least_top)
     behind, front = grid.strip_sums(axis, offset, np.arange(n_cells))
     one_camera = len(rule.views) == 1
     if one_camera:
@@ -579,6 +589,7 @@ def find_wall_lines(
     ceiling_z: float | None,
     params: LayoutParams,
     views: Sequence[CameraView] = (),
+    thin: bool = False,
 ) -> list[WallLine]:
     """Detect candidate wall lines with their evidence.
 
@@ -590,6 +601,8 @@ def find_wall_lines(
     params : grid cell size, N, shortest segment.
     views : the cameras of an RGB-D frame (aligned frame): the height a wall column must
         show is then measured against what they saw of it.
+    thin : a cloud thinner than the calibration's: a column's neighbours along the line may
+        show how high it reaches.
     """
     if len(aligned) == 0:
         return []
@@ -612,6 +625,7 @@ def find_wall_lines(
         views=tuple(views),
         # One camera: what stands in front of a wall hides its foot (many cameras: none).
         horizon=_Horizon.of(views[0].centre, aligned[in_band]) if len(views) == 1 else None,
+        reach_cells=_THIN_REACH_CELLS if thin else 0,
     )
     lines: list[WallLine] = []
     flat_xy = aligned[horizontal, :2]

@@ -116,6 +116,57 @@ def test_short_furniture_is_not_a_wall():
     assert not any(ln.axis == 0 and abs(ln.offset - 2.0) < 0.1 for ln in lines)
 
 
+def _corner_with_wardrobe(rng: np.random.Generator, height: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points and normals of walls y = 0 and x = 6 (2.6 m high, interior y > 0, x < 6),
+    the floor, and a wardrobe ``height`` tall against x = 6 at y 3-4, where the scan ends:
+    its front x = 5.4 and its side y = 3 face the room, and the wall over it shows (its top,
+    above the scanner, does not)."""
+
+    def face(
+        n: int, lo: list[float], hi: list[float], normal: list[float]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        return rng.uniform(lo, hi, size=(n, 3)), np.tile(normal, (n, 1))
+
+    parts = [
+        face(6000, [0, 0, 0], [6, 0, 2.6], [0.0, 1.0, 0.0]),
+        face(3000, [6, 0, 0], [6, 3, 2.6], [-1.0, 0.0, 0.0]),
+        face(500, [6, 3, height], [6, 4, 2.6], [-1.0, 0.0, 0.0]),
+        face(1000, [5.4, 3, 0], [5.4, 4, height], [-1.0, 0.0, 0.0]),
+        face(600, [5.4, 3, 0], [6, 3, height], [0.0, -1.0, 0.0]),
+        face(8000, [0, 0, 0], [6, 3, 0], [0.0, 0.0, 1.0]),
+        face(2000, [0, 3, 0], [5.4, 4, 0], [0.0, 0.0, 1.0]),
+    ]
+    return np.vstack([p for p, _ in parts]), np.vstack([n for _, n in parts])
+
+
+@pytest.mark.parametrize(("height", "wall"), [(2.25, False), (2.6, True)])
+def test_a_wardrobe_short_of_the_ceiling_is_not_a_wall(height: float, wall: bool) -> None:
+    # 2.25 m of a 2.6 m room reaches high, yet walls reach the ceiling: at a scan's end, a
+    # wardrobe's side taken for a wall turned the chain into a corner the room does not have.
+    points, normals = _corner_with_wardrobe(np.random.default_rng(3), height)
+    lines = find_wall_lines(points, normals, 0.0, 2.6, LayoutParams())
+    side = [ln for ln in lines if ln.axis == 0 and abs(ln.offset - 3.0) < 0.1]
+    assert bool(side) == wall
+    assert any(ln.axis == 0 and abs(ln.offset) < 0.1 for ln in lines)  # the room's walls
+    assert any(ln.axis == 1 and abs(ln.offset - 6.0) < 0.1 for ln in lines)
+
+
+def test_a_thin_scans_wall_whose_columns_miss_their_top_here_and_there_is_still_a_wall() -> None:
+    # A thin scan leaves most of a wall's columns short of the top: keep the top 0.4 m of
+    # the wall y = 0 in one 8 cm column of every four only.
+    points, normals = _box_room(np.random.default_rng(1))
+    x, y, z = points.T
+    column = np.floor(x / LayoutParams().cell_size).astype(int)
+    cut = (np.abs(y) < 1e-9) & (z > 2.2) & (column % 4 != 0) & (np.abs(normals[:, 1]) > 0.5)
+    lines = find_wall_lines(points[~cut], normals[~cut], 0.0, 2.6, LayoutParams(), thin=True)
+    wall = [ln for ln in lines if ln.axis == 0 and abs(ln.offset) < 0.1]
+    assert len(wall) == 1 and len(wall[0].segments) == 1
+    assert wall[0].segments[0, 0] < 0.1 and wall[0].segments[0, 1] > 5.9
+    # A dense scan's column shows its own top: there the wall breaks up.
+    dense = find_wall_lines(points[~cut], normals[~cut], 0.0, 2.6, LayoutParams())
+    assert not any(ln.axis == 0 and abs(ln.offset) < 0.1 for ln in dense)
+
+
 def test_threshold_follows_room_height_and_sensor_density():
     params = LayoutParams()
     dense = np.full(100, 40, dtype=np.int64)
