@@ -98,13 +98,13 @@ class WallLine:
         sides of the line: no wall stands there, at most a doorway."""
         return self._longest_run(self.seen_through, start, end)
 
-    def high_wall_beyond(self, run: float, outward: int) -> float:
+    def high_wall_beyond(self, run: float, outward: int, hidden_only: bool = False) -> float:
         """How far (m) the wall runs on, seen only above door height, from a segment end at
         run coordinate ``run`` in direction ``outward`` (+1 or -1), starting within a few
         cells of the end: the lintel over a doorway (space seen behind the line under it)
         or a wall whose lower part tall furniture hides. 0 when there is none, or it is too
         short (0.3 m for a doorway, 0.6 m for a hidden wall: a corner's clutter) or wider
-        than a doorway."""
+        than a doorway, or (``hidden_only``) it is a doorway."""
         if self.seen_through is None or self.lintel is None:
             return 0.0
         first = int(np.rint((run - self.origin) / self.cell_size)) - (outward < 0)
@@ -115,6 +115,8 @@ class WallLine:
         start, stop = span
         doorway = bool(_cells_ahead(self.seen_through, first, outward, limit)[start:stop].any())
         least = _MIN_DOORWAY if doorway else _MIN_HIDDEN_WALL
+        if doorway and hidden_only:
+            return 0.0
         if (stop - start) * self.cell_size < least or stop * self.cell_size > MAX_DOORWAY:
             return 0.0
         return stop * self.cell_size
