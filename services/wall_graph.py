@@ -469,35 +469,4 @@ def _ends_along_high_wall(points: FloatArray, lines: Sequence[WallLine]) -> Floa
             default=0.0,
         )
         out[end, axis] += outward * reach
-        if reach == 0.0:
-            out = _turn_onto_hidden_wall(out, end, axis, lines)
     return out
-
-
-def _turn_onto_hidden_wall(
-    points: FloatArray, end: int, axis: int, lines: Sequence[WallLine]
-) -> FloatArray:
-    """The chain with one more wall at ``end`` (0 or -1) when the corner there turns onto a
-    wall that tall furniture hides: the wall across the chain's last one (running along
-    ``axis``) shows at most a short full-height stretch by the corner, then only its part
-    over the furniture. The search's corner price rejects the short stretch; what runs on
-    over the furniture shows where the wall goes."""
-    corner = points[end]
-    across = 1 - axis
-    best, towards = 0.0, 0
-    for outward in (1, -1):
-        travel = outward if end == -1 else -outward
-        for line in lines:
-            if line.axis != across or line.travel != travel:
-                continue
-            if abs(line.offset - corner[axis]) >= _END_MATCH:
-                continue
-            seen = line.high_run_beyond(float(corner[across]), outward)
-            hidden = line.high_wall_beyond(float(corner[across]) + outward * seen, outward, True)
-            if hidden > 0.0 and seen + hidden > best:
-                best, towards = seen + hidden, outward
-    if best == 0.0:
-        return points
-    turned = corner.copy()
-    turned[across] += towards * best
-    return np.vstack([points, turned]) if end == -1 else np.vstack([turned, points])

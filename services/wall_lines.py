@@ -52,6 +52,7 @@ MAX_DOORWAY = 2.0
 _RECESS_DEPTH = 0.3  # m, a wall reaching this far behind a gap's edge: a recess, not a door
 _MIN_DOORWAY = 0.3  # m, least doorway a wall's end is carried across
 _MIN_HIDDEN_WALL = 0.6  # m, least wall seen only over tall furniture a wall's end runs on along
+_LINTEL_BINS = 3  # height bins a column seen only over door height must hold to count
 _LINTEL_LOW = 1.8  # m over the floor: a column whose wall points all stand higher spans an opening
 
 
@@ -98,13 +99,13 @@ class WallLine:
         sides of the line: no wall stands there, at most a doorway."""
         return self._longest_run(self.seen_through, start, end)
 
-    def high_wall_beyond(self, run: float, outward: int, hidden_only: bool = False) -> float:
+    def high_wall_beyond(self, run: float, outward: int) -> float:
         """How far (m) the wall runs on, seen only above door height, from a segment end at
         run coordinate ``run`` in direction ``outward`` (+1 or -1), starting within a few
         cells of the end: the lintel over a doorway (space seen behind the line under it)
         or a wall whose lower part tall furniture hides. 0 when there is none, or it is too
         short (0.3 m for a doorway, 0.6 m for a hidden wall: a corner's clutter) or wider
-        than a doorway, or (``hidden_only``) it is a doorway."""
+        than a doorway."""
         if self.seen_through is None or self.lintel is None:
             return 0.0
         first = int(np.rint((run - self.origin) / self.cell_size)) - (outward < 0)
@@ -115,8 +116,6 @@ class WallLine:
         start, stop = span
         doorway = bool(_cells_ahead(self.seen_through, first, outward, limit)[start:stop].any())
         least = _MIN_DOORWAY if doorway else _MIN_HIDDEN_WALL
-        if doorway and hidden_only:
-            return 0.0
         if (stop - start) * self.cell_size < least or stop * self.cell_size > MAX_DOORWAY:
             return 0.0
         return stop * self.cell_size
@@ -443,7 +442,10 @@ def _lines_from_peak(
     xy = np.column_stack([run, np.full(n_cells, offset)])
     least_n, least_top = rule.per_cell(xy if axis == 0 else xy[:, ::-1], s)
     near_reach = maximum_filter1d(reach, 2 * rule.reach_cells + 1, mode="constant", cval=0)
-    tall = (np.bincount(keys // 4096, minlength=n_cells) >= least_n) & (near_reach >= least_top)
+    bins = np.bincount(keys // 4096, minlength=n_cells)
+    # A column seen only over door height that reaches the ceiling is wall over furniture
+    # (or a lintel, told apart by the space seen behind it below).
+    tall = ((bins >= least_n) | (lintel & (bins >= _LINTEL_BINS))) & (near_reach >= least_top)
     behind, front = grid.strip_sums(axis, offset, np.arange(n_cells))
     one_camera = len(rule.views) == 1
     if one_camera:

@@ -162,30 +162,6 @@ def test_a_wall_hidden_below_by_tall_furniture_runs_on_if_long_enough(width, run
     assert np.allclose(chain.keypoints, [[0.0, 1.0], [end, 1.0]], atol=0.01)
 
 
-@pytest.mark.parametrize(
-    "over_furniture, seen_behind, turns",
-    [
-        ((1.24, 2.24), False, True),  # a wardrobe hides the wall's lower part past 1.24
-        ((1.24, 1.64), False, False),  # 0.4 m: a corner's clutter, not wall
-        ((1.24, 2.24), True, False),  # space seen behind: a doorway, the room goes on there
-    ],
-)
-def test_a_chain_turns_onto_a_wall_tall_furniture_hides(over_furniture, seen_behind, turns):
-    # Wall along x at y = 1 (interior +y) up to the corner x = 5; the wall along y at x = 5
-    # (interior -x, travelled +y) shows full height only from y = 1 to 1.24, too short for a
-    # corner of its own, then only over the wardrobe.
-    along = _line(0, 1.0, 1, [(0.0, 5.0)])
-    across = _line(1, 5.0, 1, [(1.0, 1.24)])
-    over = _flags(across, [over_furniture])
-    across = dataclasses.replace(
-        across, lintel=over, seen_through=over if seen_behind else np.zeros_like(over)
-    )
-    chain = find_wall_chain([along, across], LayoutParams())
-    assert chain is not None
-    expected = [[0.0, 1.0], [5.0, 1.0]] + ([[5.0, 2.24]] if turns else [])
-    assert np.allclose(chain.keypoints, expected, atol=0.09)
-
-
 def _flags(line: WallLine, spans: list[tuple[float, float]]) -> np.ndarray:
     flags = np.zeros_like(line.high)
     for lo, hi in spans:

@@ -151,6 +151,34 @@ def test_a_wardrobe_short_of_the_ceiling_is_not_a_wall(height: float, wall: bool
     assert any(ln.axis == 1 and abs(ln.offset - 6.0) < 0.1 for ln in lines)
 
 
+@pytest.mark.parametrize(("seen_behind", "wall"), [(False, True), (True, False)])
+def test_a_wall_seen_only_over_tall_furniture_is_a_wall(seen_behind: bool, wall: bool) -> None:
+    # Wardrobes 2 m tall along the whole of x = 6 (y 0-3, front x = 5.4) leave only the
+    # wall's top 0.6 m in view. With floor seen behind it, the same top is a lintel over an
+    # opening, not wall bounding the room.
+    rng = np.random.default_rng(5)
+    points, normals = _corner_with_wardrobe(rng, 2.0)
+    keep = ~((np.abs(points[:, 0] - 6.0) < 1e-9) & (points[:, 2] < 2.0))
+    points, normals = points[keep], normals[keep]
+    over = rng.uniform([6, 0, 2.0], [6, 3, 2.6], size=(1500, 3))
+    front = rng.uniform([5.4, 0, 0], [5.4, 3, 2.0], size=(3000, 3))
+    extra = [over, front]
+    if seen_behind:
+        extra.append(rng.uniform([6.2, 0, 0], [7.0, 3, 0], size=(2000, 3)))
+    points = np.vstack([points, *extra])
+    normals = np.vstack(
+        [
+            normals,
+            np.tile([-1.0, 0.0, 0.0], (4500, 1)),
+            *([np.tile([0.0, 0.0, 1.0], (2000, 1))] if seen_behind else []),
+        ]
+    )
+    lines = find_wall_lines(points, normals, 0.0, 2.6, LayoutParams())
+    back = [ln for ln in lines if ln.axis == 1 and abs(ln.offset - 6.0) < 0.1 and ln.travel == 1]
+    covered = sum(float(b - a) for ln in back for a, b in ln.segments if b > 0.5 and a < 2.5)
+    assert (covered > 1.5) == wall
+
+
 def test_a_thin_scans_wall_whose_columns_miss_their_top_here_and_there_is_still_a_wall() -> None:
     # A thin scan leaves most of a wall's columns short of the top: keep the top 0.4 m of
     # the wall y = 0 in one 8 cm column of every four only.
