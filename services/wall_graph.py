@@ -444,7 +444,7 @@ def _closer_to_the_walls(
 
 
 def _ends_along_high_wall(points: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
-    """The chain with each end carried on along wall seen only above door height.
+    """The chain with each end carried on along wall seen only high up (``WallLine.lintel``).
 
     A scan that ends inside a doorway sees its jamb, and past it the lintel over the opening
     with the next room's floor behind it; the wall runs on through the opening, as far as

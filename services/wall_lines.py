@@ -52,8 +52,9 @@ MAX_DOORWAY = 2.0
 _RECESS_DEPTH = 0.3  # m, a wall reaching this far behind a gap's edge: a recess, not a door
 _MIN_DOORWAY = 0.3  # m, least doorway a wall's end is carried across
 _MIN_HIDDEN_WALL = 0.6  # m, least wall seen only over tall furniture a wall's end runs on along
-_LINTEL_BINS = 3  # height bins a column seen only over door height must hold to count
-_LINTEL_LOW = 1.8  # m over the floor: a column whose wall points all stand higher spans an opening
+_LINTEL_BINS = 3  # height bins a column seen only high up must hold to count as wall
+_LINTEL_LOW = 1.6  # m over the floor: a column whose wall points all stand higher is wall over
+# an opening (a lintel) or over tall furniture (wardrobes, shelves, fridges: 1.6 m and up)
 
 
 @dataclass(frozen=True)
@@ -72,8 +73,8 @@ class WallLine:
     seen_through: (C,) bool or None: cells with no evidence where space was scanned behind
     the line as well as in front (None on a deduced wall).
     occupied: (C,) bool or None: cells holding any wall point of the line, at any height.
-    lintel: (C,) bool or None: cells whose wall points all stand over door height (the
-    wall above an opening).
+    lintel: (C,) bool or None: cells whose wall points all stand over 1.6 m (the wall
+    above an opening, or above tall furniture).
     """
 
     axis: int
@@ -100,7 +101,7 @@ class WallLine:
         return self._longest_run(self.seen_through, start, end)
 
     def high_wall_beyond(self, run: float, outward: int) -> float:
-        """How far (m) the wall runs on, seen only above door height, from a segment end at
+        """How far (m) the wall runs on, seen only high up (lintel), from a segment end at
         run coordinate ``run`` in direction ``outward`` (+1 or -1), starting within a few
         cells of the end: the lintel over a doorway (space seen behind the line under it)
         or a wall whose lower part tall furniture hides. 0 when there is none, or it is too
@@ -443,7 +444,7 @@ def _lines_from_peak(
     least_n, least_top = rule.per_cell(xy if axis == 0 else xy[:, ::-1], s)
     near_reach = maximum_filter1d(reach, 2 * rule.reach_cells + 1, mode="constant", cval=0)
     bins = np.bincount(keys // 4096, minlength=n_cells)
-    # A column seen only over door height that reaches the ceiling is wall over furniture
+    # A column seen only high up (lintel) that reaches the ceiling is wall over furniture
     # (or a lintel, told apart by the space seen behind it below).
     tall = ((bins >= least_n) | (lintel & (bins >= _LINTEL_BINS))) & (near_reach >= least_top)
     behind, front = grid.strip_sums(axis, offset, np.arange(n_cells))
