@@ -73,8 +73,8 @@ class WallLine:
     seen_through: (C,) bool or None: cells with no evidence where space was scanned behind
     the line as well as in front (None on a deduced wall).
     occupied: (C,) bool or None: cells holding any wall point of the line, at any height.
-    lintel: (C,) bool or None: cells whose wall points all stand over 1.6 m (the wall
-    above an opening, or above tall furniture).
+    lintel: (C,) bool or None: cells whose wall points all stand over ``_LINTEL_LOW`` (the
+    wall above an opening, or above tall furniture).
     """
 
     axis: int

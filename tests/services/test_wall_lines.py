@@ -159,20 +159,16 @@ def test_a_wall_seen_only_over_tall_furniture_is_a_wall(seen_behind: bool, wall:
     rng = np.random.default_rng(5)
     points, normals = _corner_with_wardrobe(rng, 2.0)
     keep = ~((np.abs(points[:, 0] - 6.0) < 1e-9) & (points[:, 2] < 2.0))
-    points, normals = points[keep], normals[keep]
-    over = rng.uniform([6, 0, 2.0], [6, 3, 2.6], size=(1500, 3))
-    front = rng.uniform([5.4, 0, 0], [5.4, 3, 2.0], size=(3000, 3))
-    extra = [over, front]
+    facing_room, up = np.array([-1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    faces = [
+        (points[keep], normals[keep]),
+        (rng.uniform([6, 0, 2.0], [6, 3, 2.6], size=(1500, 3)), facing_room),  # over
+        (rng.uniform([5.4, 0, 0], [5.4, 3, 2.0], size=(3000, 3)), facing_room),  # front
+    ]
     if seen_behind:
-        extra.append(rng.uniform([6.2, 0, 0], [7.0, 3, 0], size=(2000, 3)))
-    points = np.vstack([points, *extra])
-    normals = np.vstack(
-        [
-            normals,
-            np.tile([-1.0, 0.0, 0.0], (4500, 1)),
-            *([np.tile([0.0, 0.0, 1.0], (2000, 1))] if seen_behind else []),
-        ]
-    )
+        faces.append((rng.uniform([6.2, 0, 0], [7.0, 3, 0], size=(2000, 3)), up))
+    points = np.vstack([p for p, _ in faces])
+    normals = np.vstack([np.broadcast_to(n, p.shape) for p, n in faces])
     lines = find_wall_lines(points, normals, 0.0, 2.6, LayoutParams())
     back = [ln for ln in lines if ln.axis == 1 and abs(ln.offset - 6.0) < 0.1 and ln.travel == 1]
     covered = sum(float(b - a) for ln in back for a, b in ln.segments if b > 0.5 and a < 2.5)
