@@ -285,6 +285,18 @@ def _drop_end_reveals(keypoints: FloatArray) -> FloatArray:
     return kp
 
 
+def _without_furniture(keypoints: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
+    """The chain with the furniture fronts it went round and its ends' reveals taken out.
+
+    Corners a front hid move first (:func:`_past_corner_fronts`), then fronts are flattened
+    and reveals dropped; a reveal at an end hides an early turn before it, so the corners
+    are looked at again once it is gone.
+    """
+    kp = _past_corner_fronts(keypoints, lines)
+    kp = _drop_end_reveals(_flatten_furniture(_flatten_corner_fronts(kp)))
+    return _past_corner_fronts(kp, lines)
+
+
 def _reverse_chain(kp: FloatArray) -> FloatArray:
     """The same chain walked backwards with the room on its right; reversing twice is a
     no-op (used to treat the source end like the target end)."""
@@ -415,9 +427,7 @@ def estimate_frame_layout(
             evidence="frame",
             view_angle=across,
         )
-    kp = _past_corner_fronts(chain.keypoints, lines)
-    kp = _drop_end_reveals(_flatten_furniture(_flatten_corner_fronts(kp)))
-    kp = _to_frustum_edges(kp, lines, views)
+    kp = _to_frustum_edges(_without_furniture(chain.keypoints, lines), lines, views)
     band, depth = params.layout.end_region_beyond, params.layout.end_region_depth
     report("done", 1.0)
     return LocalLayout(

@@ -685,10 +685,11 @@ def _facing_cameras(
                 closed[n, away] = _doors_closed(near, lines, away)
             occupied = closed[n, away]
             cell = np.rint((c_run + (run - c_run) * ratio - near.origin) / near.cell_size)
-            inside = (cell >= 1) & (cell < len(occupied) - 1)
+            inside = (cell >= 0) & (cell < len(occupied))
             index = cell[inside].astype(np.int64)
-            through = occupied[index] | occupied[index - 1] | occupied[index + 1]
-            high[np.flatnonzero(inside)[through]] = False
+            # The crossed cell only: a wall seen just past the end of a furniture front
+            # (its neighbour cell) was seen beside it, not through it.
+            high[np.flatnonzero(inside)[occupied[index]]] = False
         spans = _runs(high, _MAX_GAP_CELLS, params.min_wall_cells)
         if spans:
             segments = np.array(

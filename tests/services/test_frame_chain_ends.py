@@ -17,6 +17,7 @@ from services.frame_layout import (
     _floor,
     _past_corner_fronts,
     _to_frustum_edges,
+    _without_furniture,
 )
 from services.frustum import CameraView, in_any_view, side_rays, swept_cells
 from services.synthetic.render import KINECT
@@ -156,6 +157,18 @@ def test_a_corner_hidden_by_a_wardrobe_is_moved_where_the_wall_beside_it_ends() 
     # Wall seen on past the turn by more than furniture is deep: another wall's evidence.
     far = dataclasses.replace(wall, high=(runs > -2.0) & (runs < 4.0))
     np.testing.assert_allclose(_past_corner_fronts(chain, [far]), chain)
+
+
+def test_a_corner_hidden_by_a_wardrobe_is_found_behind_an_openings_reveal() -> None:
+    # As above, and the chain ends on a door's 0.25 m reveal past the front: the early turn
+    # is not the chain's last corner until the reveal is dropped.
+    wall = _line(3.0, -1)
+    runs = wall.origin + (np.arange(len(wall.high)) + 0.5) * wall.cell_size
+    wall = dataclasses.replace(wall, high=(runs > -0.5) & (runs < 4.0))
+    chain = np.array([[3.0, 3.0], [0.0, 3.0], [0.0, 1.0], [-0.25, 1.0]])
+    np.testing.assert_allclose(
+        _without_furniture(chain, [wall]), [[3.0, 3.0], [-0.48, 3.0], [-0.48, 1.0]], atol=0.05
+    )
 
 
 def test_the_cells_a_camera_saw_through_reach_its_wall_but_not_past_a_stray_point() -> None:

@@ -137,6 +137,23 @@ def test_the_wall_of_the_next_room_seen_through_a_door_is_not_the_frames_wall(
     np.testing.assert_allclose(world[:, 1], [2.65 + half, 2.65 - half], atol=0.15)
 
 
+@pytest.mark.parametrize(("x", "y", "yaw"), [(4.0, 1.3, 129.0), (3.8, 1.4, 125.0)])
+def test_the_wall_seen_just_past_a_protruding_corner_keeps_the_recess(
+    x: float, y: float, yaw: float
+) -> None:
+    # A block 1.3 m wide and 1.35 m deep stands out of the wall y = 5; the camera sees its
+    # front, not its far side, and past its corner a few decimeters of the wall behind it up
+    # to the room's corner. Those rays pass right by the block's corner: the wall is seen
+    # beside the block, not through it, and the chain goes back to y = 5 behind the block.
+    outline = [[1.7, 5.0], [0, 5], [0, 0], [5.3, 0], [5.3, 5], [3, 5], [3, 3.65], [1.7, 3.65]]
+    room = Room.from_polygon(np.array(outline), 2.7)
+    frame, pose = render_views(room, Furnishing(), {"f": ((x, y, 1.5), yaw, -5.0)})["f"]
+    layout = estimate_rgbd_layout(frame)
+    world = layout.keypoints_local() @ pose[:3, :3].T + pose[:3, 3]
+    corners = [[3.0, 5.0], [3.0, 3.65], [1.7, 3.65], [1.7, 5.0], [0.0, 5.0]]
+    np.testing.assert_allclose(world[1:-1, :2], corners, atol=0.08)
+
+
 def test_a_frames_seen_space_reaches_back_to_its_camera() -> None:
     # A level camera sees the floor only a few meters out; its rays crossed the space
     # before that, and the placement must keep other frames' walls out of it too.
