@@ -304,12 +304,16 @@ def _reverse_chain(kp: FloatArray) -> FloatArray:
     return flipped
 
 
-def _wall_across(lines: Sequence[WallLine], line: WallLine, start: float, stop: float) -> bool:
-    """True when a seen wall of the other axis meets ``line`` between two of its run
-    coordinates (two cells of slack): the wall turns there, it does not go on. A wall
-    shorter than ``_MIN_TURN`` on both sides of the line is a door's or window's reveal."""
+def _wall_across(
+    lines: Sequence[WallLine], line: WallLine, start: float, stop: float
+) -> float | None:
+    """The run coordinate nearest ``start`` where a seen wall of the other axis meets
+    ``line`` between two of its run coordinates (two cells of slack): the wall turns there,
+    it does not go on; None when none does. A wall shorter than ``_MIN_TURN`` on both sides
+    of the line is a door's or window's reveal."""
     lo, hi = sorted((start, stop))
     reach = 2 * line.cell_size
+    found = []
     for other in lines:
         if other.virtual or other.axis == line.axis or not lo - reach < other.offset < hi + reach:
             continue
@@ -317,8 +321,8 @@ def _wall_across(lines: Sequence[WallLine], line: WallLine, start: float, stop: 
         meets = (spans[:, 0] - reach <= line.offset) & (spans[:, 1] + reach >= line.offset)
         long = np.maximum(spans[:, 1] - line.offset, line.offset - spans[:, 0]) >= _MIN_TURN
         if np.any(meets & long):
-            return True
-    return False
+            found.append(other.offset)
+    return min(found, key=lambda offset: abs(offset - start)) if found else None
 
 
 def _to_frustum_edges(
@@ -328,9 +332,9 @@ def _to_frustum_edges(
 
     A frame sees its walls up to its image's edges: where the wall evidence stops short of
     them, furniture, a window or a door hides the rest of a wall that goes on (the next
-    frame's chain starts at that edge). The move is refused where a seen wall of the other
-    axis meets the line on the way (the wall turns there; a door's reveal does not count) or
-    where the line would run through more than 2 m of space seen on both sides (the room
+    frame's chain starts at that edge). The move stops where a seen wall of the other axis
+    meets the line on the way (the wall turns there; a door's reveal does not count), and is
+    refused where the line would run through more than 2 m of space seen on both sides (the room
     opens up there), the WE-graph's limit for an edge (services.wall_graph). Nothing
     scanned on the room's side is no reason to stop: a wardrobe hides that strip as well
     (refusing those moves cost 9 points of ACC_local on the frames benchmark).
@@ -349,9 +353,12 @@ def _to_frustum_edges(
             continue
         moved = keypoints[end] + reach * outward
         start, stop = float(keypoints[end][line.axis]), float(moved[line.axis])
-        if not _wall_across(lines, line, start, stop) and (
-            line.crossing_gap(start, stop) <= MAX_DOORWAY
-        ):
+        turn = _wall_across(lines, line, start, stop)
+        if turn is not None:  # the wall turns on the way: its end goes to the corner
+            along = max((turn - start) * float(np.sign(outward[line.axis])), 0.0)
+            moved = keypoints[end] + along * outward
+            stop = float(moved[line.axis])
+        if line.crossing_gap(start, stop) <= MAX_DOORWAY:
             out[end] = moved
     return out
 

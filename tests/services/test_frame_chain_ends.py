@@ -101,17 +101,22 @@ def test_a_shallow_front_in_a_corner_gives_the_corner_back_even_when_its_side_wa
     np.testing.assert_allclose(_flatten_corner_fronts(deep), deep)
 
 
-def test_chain_ends_move_out_to_the_frustum_edges_unless_a_wall_turns() -> None:
+def test_chain_ends_move_out_to_the_frustum_edges_or_to_a_wall_turning_on_the_way() -> None:
     view = CameraView.from_intrinsics(KINECT, LEVEL, np.zeros(3))
     right, left = side_rays(view)
     chain = np.array([[1.0, 3.0], [-1.0, 3.0]])  # a wall at y = 3, room below, travel -x
     moved = _to_frustum_edges(chain, [_line(3.0, -1)], [view])
     np.testing.assert_allclose(moved[0], 3.0 / right[1] * right, atol=1e-9)
     np.testing.assert_allclose(moved[1], 3.0 / left[1] * left, atol=1e-9)
-    # A seen wall meets the line past the target end: the chain ends at that corner.
+    # A seen wall meets the line past the target end: the chain ends at that corner, not
+    # at the frustum's edge past it.
     corner = _line(-1.5, 1, axis=1)
     corner = WallLine(**{**corner.__dict__, "segments": np.array([[2.0, 3.0]])})
-    kept = _to_frustum_edges(chain, [_line(3.0, -1), corner], [view])
+    turned = _to_frustum_edges(chain, [_line(3.0, -1), corner], [view])
+    np.testing.assert_allclose(turned[1], [-1.5, 3.0], atol=1e-9)
+    # A wall that meets the line just behind the end (within its slack) moves nothing.
+    behind = WallLine(**{**corner.__dict__, "offset": -0.9})
+    kept = _to_frustum_edges(chain, [_line(3.0, -1), behind], [view])
     np.testing.assert_allclose(kept[1], chain[1])
     # A door's reveal there (the wall's thickness, behind it) is no turn of the wall.
     reveal = WallLine(**{**corner.__dict__, "segments": np.array([[3.0, 3.15]])})
