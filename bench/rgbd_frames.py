@@ -62,7 +62,7 @@ from bench.scoring import (  # noqa: E402
     params_with,
 )
 from bench.tune_placement import LIMITS, limit_of, scene_candidates  # noqa: E402
-from bench.world_scenes import CachedScene  # noqa: E402
+from bench.world_scenes import BUCKETS, CachedScene, bucket_of  # noqa: E402
 from schemas.params import PipelineParams  # noqa: E402
 from services.confidence import view_beyond_kinect  # noqa: E402
 from services.evaluation import evaluate_result  # noqa: E402
@@ -120,12 +120,14 @@ def run(
     """Local and global figures over ``n_scenes`` frame scenes from ``first_seed``, seen by
     ``CAMERAS[camera]``; ``"confidences"``, ``"right"`` and ``"views"`` list each main
     room's confidence, verdict and its frames' view beyond the kinect's
-    (:func:`services.confidence.view_beyond_kinect`, radians)."""
+    (:func:`services.confidence.view_beyond_kinect`, radians); ``"buckets"`` maps a
+    frame-count bucket ("4-5") to its rooms' ``[right, said closed, closed and right, rooms]``."""
     local, global_ok, rotation, translation, frames, statuses = [], [], [], [], [], []
     confidences: list[float] = []
     right: list[bool] = []
     views: list[float] = []
     clock = LayoutClock()
+    buckets: dict[str, list[int]] = {}
     skipped = 0
     for scene in _scenes(n_scenes, first_seed, outlines, camera):
         if scene is None:
@@ -145,6 +147,11 @@ def run(
         global_ok.append(report.global_correct)
         statuses.append(result["status"])
         frames.append(len(scene.frames))
+        closed = result["status"] == "closed"
+        counts = buckets.setdefault(bucket_of(len(scene.frames)), [0, 0, 0, 0])
+        for k, add in enumerate((report.global_correct, closed, closed and report.global_correct)):
+            counts[k] += int(add)
+        counts[3] += 1
         rotation += [e.rotation_deg for e in report.pose_errors.values()]
         translation += [e.translation_pct for e in report.pose_errors.values()]
     ms, ms_p90 = _median_ms(clock.seconds)
@@ -169,6 +176,7 @@ def run(
         "confidences": confidences,
         "right": right,
         "views": views,
+        "buckets": buckets,
     }
 
 
@@ -188,6 +196,20 @@ def _row(name: str, r: dict[str, Any]) -> str:
         f"{r['ms_per_frame']:.0f} ({r['ms_per_frame_p90']:.0f}) | "
         f"{r['cpu_ms_per_frame']:.0f} ({r['cpu_ms_per_frame_p90']:.0f}) | {_calibration(r)} |"
     )
+
+
+def bucket_row(name: str, r: dict[str, Any]) -> str:
+    """One table row of ACC_global per frame-count bucket: "right of rooms (%), closed
+    (right)" in each, "-" where no room has that many frames."""
+    cells = []
+    for lo, hi in BUCKETS:
+        right, closed, closed_right, rooms = r["buckets"].get(f"{lo}-{hi}", (0, 0, 0, 0))
+        cells.append(
+            f"{right}/{rooms} ({100 * right / rooms:.0f} %), {closed} ({closed_right})"
+            if rooms
+            else "-"
+        )
+    return f"| {name} | " + " | ".join(cells) + " |"
 
 
 def _calibration(r: dict[str, Any]) -> str:
@@ -241,12 +263,20 @@ def _table(n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams,
         "CPU ms/frame median (p90) | main rooms: mean confidence / right / Brier |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-    print(_row("synthetic", run(n_scenes, first_seed, None, params, name)))
+    figures = {"synthetic": run(n_scenes, first_seed, None, params, name)}
+    print(_row("synthetic", figures["synthetic"]))
     # Tune seeds (2000 and up) draw the shapes' tune split, held-out seeds its test split.
     outlines = frame_outlines("tune" if first_seed >= 2000 else "test") if shapes else []
     if outlines:
-        print(_row("MatterportLayout shapes", run(n_scenes, first_seed, outlines, params, name)))
+        shaped = run(n_scenes, first_seed, outlines, params, name)
+        figures["MatterportLayout shapes"] = shaped
+        print(_row("MatterportLayout shapes", shaped))
     print("paper (RGB-D and clouds): ACC_global 85.1 %, rotation 8.79 deg, translation 9.15 %")
+    print("\nACC_global by frames per room: right of rooms (%), said closed (right)")
+    print("| rooms | " + " | ".join(f"{lo}-{hi} frames" for lo, hi in BUCKETS) + " |")
+    print("|---|" + "---|" * len(BUCKETS))
+    for room_set, r in figures.items():
+        print(bucket_row(room_set, r))
 
 
 def frame_outlines(split: str) -> list[FloatArray]:

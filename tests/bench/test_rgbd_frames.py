@@ -8,7 +8,15 @@ import math
 import numpy as np
 import pytest
 
-from bench.rgbd_frames import LayoutClock, _row, _scenes, cached_scenes, limits, run
+from bench.rgbd_frames import (
+    LayoutClock,
+    _row,
+    _scenes,
+    bucket_row,
+    cached_scenes,
+    limits,
+    run,
+)
 from bench.tune_placement import LIMITS, main
 from services.synthetic.render import CAMERAS, KINECT
 
@@ -32,6 +40,14 @@ def test_one_scene_is_scored_with_every_frame_timed() -> None:
     assert figures["closed"] + figures["ambiguous"] <= 1
     assert figures["closed_right"] <= figures["closed"]
     assert figures["closed_right"] == (figures["closed"] == 1 and figures["acc_global"] == 1.0)
+    # Its room is counted in the bucket of its frame count, with the same verdicts.
+    [(bucket, counts)] = figures["buckets"].items()
+    lo, hi = (int(n) for n in bucket.split("-"))
+    assert lo <= figures["frames"] <= hi
+    assert counts == [figures["acc_global"], figures["closed"], figures["closed_right"], 1]
+    row = bucket_row("one", figures)
+    assert row.count("|") == 7 and row.count(" - ") == 4
+    assert f"{int(counts[0])}/1 ({100 * counts[0]:.0f} %)" in row
 
 
 def test_a_room_no_station_can_tile_is_counted_as_not_rendered() -> None:
