@@ -36,7 +36,7 @@ from rich import box
 from rich.console import Console
 from rich.table import Table
 
-from bench.scoring import add_params_option, params_with, true_assembly
+from bench.scoring import add_params_option, chain_error_in_plan, params_with, true_assembly
 from bench.world_scenes import (
     DEFAULT_CACHE,
     CachedScene,
@@ -47,7 +47,7 @@ from bench.world_scenes import (
     scene_jobs,
 )
 from schemas.params import PipelineParams
-from services.evaluation import evaluate_result, local_layout_correct
+from services.evaluation import evaluate_result
 from services.pipeline import place_site
 from services.placement import evaluate_placement, make_piece
 from services.placement.energy import FEATURES, feature_weights
@@ -124,14 +124,10 @@ def _chains_right_in_plan(result: dict[str, Any], truth: dict[str, Any]) -> bool
     """Every fragment's chain within 5 % of its diagonal of the truth, both seen along the
     fragment's true up axis."""
     estimated = {f["id"]: f["local_layout"]["keypoints"] for f in result["fragments"]}
-    for fragment in truth["fragments"]:
-        up = np.asarray(fragment["pose"], dtype=np.float64)[2, :3]  # world z in local axes
-        flat = np.eye(3) - np.outer(up, up)
-        est = np.asarray(estimated.get(fragment["id"], []), dtype=np.float64).reshape(-1, 3)
-        true = np.asarray(fragment["keypoints_local"], dtype=np.float64)
-        if not local_layout_correct(est @ flat, true @ flat, float(fragment["diagonal"])):
-            return False
-    return True
+    return all(
+        chain_error_in_plan(estimated.get(f["id"], []), f) < 0.05 * float(f["diagonal"])
+        for f in truth["fragments"]
+    )
 
 
 def _with(

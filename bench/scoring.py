@@ -1,6 +1,7 @@
 """Scoring helpers shared by the placement benchmarks: the true assembly of a scene, a
-candidate assembly as a result, a result's alternatives as results of their own, and the
-map of the confidence's logit fitted for one kind of evidence."""
+candidate assembly as a result, a result's alternatives as results of their own, the map of
+the confidence's logit fitted for one kind of evidence, and a chain's error in the floor
+plan."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from schemas.params import PipelineParams, PlacementParams
+from services.evaluation import keypoint_error
 from services.layout_model import build_polygon
 from services.pipeline import fragment_pose
 from services.placement import Piece, PlacementCandidate, translations_of
@@ -25,6 +27,7 @@ __all__ = [
     "add_params_option",
     "alternative_results",
     "candidate_result",
+    "chain_error_in_plan",
     "fit_logistic",
     "fit_logit_map",
     "main_room_verdict",
@@ -206,3 +209,18 @@ def add_params_option(parser: argparse.ArgumentParser) -> None:
         metavar="SECTION.FIELD=VALUE",
         help="an algorithm parameter other than its default, e.g. placement.use_outside=false",
     )
+
+
+def chain_error_in_plan(estimated_local: Any, fragment: Mapping[str, Any]) -> float:
+    """Mean keypoint error (m, :func:`services.evaluation.keypoint_error`) of a fragment's
+    chain against its truth, both seen along the fragment's true up axis: the floor plan's
+    error, whatever floor height each was put at; inf for an empty chain.
+
+    estimated_local: (K, 3) fragment-local keypoints; fragment: its ground truth JSON
+    (``pose`` local -> world, ``keypoints_local``).
+    """
+    up = np.asarray(fragment["pose"], dtype=np.float64)[2, :3]  # world z in local axes
+    flat = np.eye(3) - np.outer(up, up)
+    est = np.asarray(estimated_local, dtype=np.float64).reshape(-1, 3)
+    true = np.asarray(fragment["keypoints_local"], dtype=np.float64)
+    return keypoint_error(est @ flat, true @ flat)
