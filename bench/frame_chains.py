@@ -31,6 +31,7 @@ from bench.scoring import add_params_option, chain_error_in_plan, params_with  #
 from bench.world_scenes import CachedScene  # noqa: E402
 from schemas.params import PipelineParams  # noqa: E402
 from services.evaluation import evaluate_result  # noqa: E402
+from services.model_export import to_site  # noqa: E402
 from services.pipeline import place_site  # noqa: E402
 from services.synthetic.render import CAMERAS  # noqa: E402
 from services.types import FloatArray  # noqa: E402
@@ -79,8 +80,8 @@ def wrong_chains(
                     room_right,
                     error,
                     threshold,
-                    (truth @ pose[:3, :3].T + pose[:3, 3])[:, :2],
-                    (estimated @ pose[:3, :3].T + pose[:3, 3])[:, :2],
+                    to_site(truth, pose)[:, :2],
+                    to_site(estimated, pose)[:, :2],
                 )
             )
     return total, wrong

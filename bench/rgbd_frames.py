@@ -148,10 +148,10 @@ def run(
         statuses.append(result["status"])
         frames.append(len(scene.frames))
         closed = result["status"] == "closed"
-        counts = buckets.setdefault(bucket_of(len(scene.frames)), [0, 0, 0, 0])
-        for k, add in enumerate((report.global_correct, closed, closed and report.global_correct)):
-            counts[k] += int(add)
-        counts[3] += 1
+        verdicts = (report.global_correct, closed, closed and report.global_correct, True)
+        bucket = bucket_of(len(scene.frames))
+        counts = buckets.get(bucket, [0, 0, 0, 0])
+        buckets[bucket] = [c + int(v) for c, v in zip(counts, verdicts, strict=True)]
         rotation += [e.rotation_deg for e in report.pose_errors.values()]
         translation += [e.translation_pct for e in report.pose_errors.values()]
     ms, ms_p90 = _median_ms(clock.seconds)

@@ -10,6 +10,7 @@ import pytest
 from bench.frame_chains import describe, main, wrong_chains
 from bench.rgbd_frames import cached_scenes
 from bench.scoring import chain_error_in_plan
+from services.model_export import to_site
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -44,8 +45,7 @@ def test_a_frame_whose_chain_was_moved_is_listed_in_world_coordinates(
     [listed] = [w for w in after if w.frame == fragment["id"]]
     # It was within the threshold of the truth before the move (triangle inequality).
     assert listed.error == pytest.approx(1.0, abs=listed.threshold)
-    pose = np.asarray(fragment["pose"])
-    world = np.asarray(fragment["keypoints_local"]) @ pose[:3, :3].T + pose[:3, 3]
+    world = to_site(np.asarray(fragment["keypoints_local"]), np.asarray(fragment["pose"]))
     np.testing.assert_allclose(listed.truth, world[:, :2], atol=1e-9)
     assert np.linalg.norm(listed.estimate - listed.truth, axis=1) == pytest.approx(1.0, abs=0.1)
     assert describe(listed).startswith(f"1000 {fragment['id']}: error {listed.error:.2f} m")
