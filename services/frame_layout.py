@@ -40,6 +40,13 @@ _ON_LINE = 0.1  # m, a keypoint this close to a wall's line lies on it
 _SEED_PLANES = 2  # planes peeled off when looking for the floor's normal
 _LEVEL_BIN = 0.02  # m, height histogram bin of the floor search
 _UPRIGHT_SIN = 0.2  # a normal this far from horizontal at most: a standing surface
+_FACING_COS = 0.9  # a standing surface's normal this close to a wall's normal faces like it
+_MIN_OPENING_COVER = 0.25  # least share of the view a wall with an opening fills
+_MAX_WALL_THICKNESS = 0.3  # m, deepest top or side of a wall's opening (furniture is deeper)
+_MIN_SURFACE_POINTS = 30  # fewer points than this make no surface (a tenth: no top or side)
+_NEAR_CAMERA = 0.3  # m, standing surfaces closer to the camera are not looked at
+_OFFSET_BIN = 0.05  # m, histogram bin of the nearer surface's offset
+_COLUMN_DEGREES = 2.0  # bin of the view's columns a surface shows up in
 
 __all__ = ["FrameCamera", "estimate_frame_layout", "estimate_rgbd_layout", "frame_points"]
 
@@ -363,6 +370,79 @@ def _to_frustum_edges(
     return out
 
 
+def _strongest_offset(depth: FloatArray) -> float:
+    """The offset (m) most of ``depth`` (N,) cluster at: the densest 15 cm, its median."""
+    counts = np.bincount(np.floor(depth / _OFFSET_BIN).astype(np.int64))
+    peak = (int(np.argmax(np.convolve(counts, np.ones(3), mode="same"))) + 0.5) * _OFFSET_BIN
+    return float(np.median(depth[np.abs(depth - peak) < _ON_LINE]))
+
+
+def _wall_around_opening(
+    keypoints: FloatArray,
+    aligned: FloatArray,
+    normals: FloatArray,
+    floor_z: float,
+    view: CameraView,
+) -> FloatArray | None:
+    """The frame's wall when its one-wall chain was seen through an opening in it, else None.
+
+    Through a door or a window a camera sees the next room's wall, full height and wider
+    than the room's own wall beside or below the opening (a jamb, a pier, a sill), so the
+    chain runs along the far wall. The room's wall is then a standing surface facing the
+    same way, more than furniture stands (``_MAX_FURNITURE_DEPTH``) in front of the far one,
+    filling a good share of the view. Furniture that stands free in front of a wall shows
+    its top or its sides to the camera, deeper than a wall is thick; a wall's opening shows
+    only its reveals and sill. The returned chain runs along that surface from the
+    frustum's right edge to its left (the part of the wall the frame looks at).
+
+    keypoints: (2, 2) the chain; aligned, normals: (N, 3) the frame's points, aligned frame.
+    """
+    axis = (
+        0 if abs(keypoints[1, 0] - keypoints[0, 0]) >= abs(keypoints[1, 1] - keypoints[0, 1]) else 1
+    )
+    across = 1 - axis
+    centre = view.centre[:2]
+    side = 1.0 if keypoints[0, across] > centre[across] else -1.0
+    far = (keypoints[0, across] - centre[across]) * side
+    depth = (aligned[:, across] - centre[across]) * side  # how far out, towards the far wall
+    azimuth = np.degrees(np.arctan2(aligned[:, axis] - centre[axis], depth))
+    facing = (np.abs(normals[:, 2]) < _UPRIGHT_SIN) & (np.abs(normals[:, across]) > _FACING_COS)
+    nearer = facing & (depth > _NEAR_CAMERA) & (depth < far - _MAX_FURNITURE_DEPTH)
+    if np.count_nonzero(nearer) < _MIN_SURFACE_POINTS:
+        return None
+    offset = _strongest_offset(depth[nearer])
+    surface = nearer & (np.abs(depth - offset) < _ON_LINE)
+    # The share of the view's columns it shows up in (2-degree bins: a strided frame's
+    # points leave some 1-degree bins empty at a meter or two).
+    columns = np.unique(np.floor(azimuth[surface] / _COLUMN_DEGREES))
+    cover = _COLUMN_DEGREES * len(columns) / np.degrees(view_angle([view]))
+    if cover < _MIN_OPENING_COVER:
+        return None
+    # What lies just behind the surface's front, along it (its ends included): a top or a
+    # side.
+    lateral = aligned[:, axis]
+    reach = lateral[surface]
+    behind = (
+        (depth > offset + _ON_LINE)
+        & (depth < offset + _MAX_FURNITURE_DEPTH)
+        & (lateral >= reach.min() - _ON_LINE)
+        & (lateral <= reach.max() + _ON_LINE)
+    )
+    top = behind & (normals[:, 2] > _FLAT_COS) & (aligned[:, 2] > floor_z + _MIN_HEIGHT)
+    sides = behind & (np.abs(normals[:, axis]) > _FACING_COS)
+    for part in (top, sides):
+        deep = np.count_nonzero(part) >= _MIN_SURFACE_POINTS // 3 and (
+            np.percentile(depth[part], 95) - offset > _MAX_WALL_THICKNESS
+        )
+        if deep:
+            return None
+    rays = side_rays(view)  # right edge (the source), then left
+    if np.any(rays[:, across] * side <= 0):
+        return None  # an edge never reaches the surface
+    wall: FloatArray = centre + rays * (offset / np.abs(rays[:, across]))[:, None]
+    return wall
+
+
 def estimate_frame_layout(
     points: FloatArray,
     cameras: Sequence[FrameCamera],
@@ -435,6 +515,9 @@ def estimate_frame_layout(
             view_angle=across,
         )
     kp = _to_frustum_edges(_without_furniture(chain.keypoints, lines), lines, views)
+    if len(kp) == 2 and len(views) == 1:
+        around = _wall_around_opening(kp, aligned, normals, frame.floor_z, views[0])
+        kp = kp if around is None else around
     band, depth = params.layout.end_region_beyond, params.layout.end_region_depth
     report("done", 1.0)
     return LocalLayout(

@@ -12,7 +12,7 @@ from services.frame_layout import estimate_rgbd_layout, frame_points
 from services.frustum import CameraView, in_any_view, view_angle, visible_band
 from services.local_layout import footprint_cells
 from services.pipeline import place_site
-from services.synthetic.furniture import Furnishing, Opening
+from services.synthetic.furniture import Box, Furnishing, Opening
 from services.synthetic.render import (
     CAMERAS,
     FrameSpec,
@@ -135,6 +135,57 @@ def test_the_wall_of_the_next_room_seen_through_a_door_is_not_the_frames_wall(
     np.testing.assert_allclose(world[:, 0], 0.0, atol=0.05)  # on the wall x = 0
     half = distance * np.tan(np.arctan2(319.5, 525.0))  # the wall from edge to edge of view
     np.testing.assert_allclose(world[:, 1], [2.65 + half, 2.65 - half], atol=0.15)
+
+
+def _world_chain(
+    room: Room, furnishing: Furnishing, stance: tuple[tuple[float, float, float], float, float]
+) -> np.ndarray:
+    """The (K, 2) world floor-plan chain a Kinect frame taken from ``stance`` finds."""
+    frame, pose = render_views(room, furnishing, {"f": stance})["f"]
+    layout = estimate_rgbd_layout(frame)
+    assert layout.ok
+    world: np.ndarray = (layout.keypoints_local() @ pose[:3, :3].T + pose[:3, 3])[:, :2]
+    return world
+
+
+_HALF_VIEW = 319.5 / 525.0  # the Kinect view's half width per meter out
+
+
+@pytest.mark.parametrize(("distance", "pitch"), [(1.4, -5.0), (1.3, -10.0), (1.5, 0.0)])
+def test_a_window_filling_the_view_is_in_the_frames_wall(distance: float, pitch: float) -> None:
+    # Over the sill of a window wider than the view, the camera sees 4 m of the space behind
+    # the wall and that space's far wall, full height from edge to edge of the view; of the
+    # room's own wall it sees only the sill, a wall's thickness deep.
+    room = Room.from_polygon(np.array([[0.0, 0], [6, 0], [6, 5], [0, 5]]), 2.6)
+    furnishing = Furnishing(openings=(Opening(3, 1.45, 3.65, 0.9, 2.05),))
+    world = _world_chain(room, furnishing, ((distance, 2.55, 1.3), 180.0, pitch))
+    np.testing.assert_allclose(world[:, 0], 0.0, atol=0.05)
+    half = distance * _HALF_VIEW
+    np.testing.assert_allclose(world[:, 1], [2.55 + half, 2.55 - half], atol=0.15)
+
+
+@pytest.mark.parametrize(("y", "pitch"), [(2.9, -5.0), (3.0, -8.0)])
+def test_a_door_at_the_views_edge_is_in_the_frames_wall(y: float, pitch: float) -> None:
+    # The camera sees its wall on one side of the view and, through a door reaching the
+    # view's other edge, a longer stretch of the next room's far wall.
+    room = Room.from_polygon(np.array([[0.0, 0], [6, 0], [6, 5], [0, 5]]), 2.6)
+    furnishing = Furnishing(openings=(Opening(3, 1.9, 2.8, 0.0, 2.05),))
+    world = _world_chain(room, furnishing, ((1.25, y, 1.3), 180.0, pitch))
+    np.testing.assert_allclose(world[:, 0], 0.0, atol=0.05)
+    half = 1.25 * _HALF_VIEW
+    np.testing.assert_allclose(world[:, 1], [y + half, y - half], atol=0.15)
+
+
+@pytest.mark.parametrize("height", [0.8, 1.0])
+def test_a_low_box_standing_free_in_front_of_the_wall_is_not_read_as_the_wall(
+    height: float,
+) -> None:
+    # A box 0.6 m deep stands 1.4 m out from the wall, filling much of the view below the
+    # wall: unlike a window's sill it shows its top, deeper than a wall is thick.
+    room = Room.from_polygon(np.array([[0.0, 0], [6, 0], [6, 5], [0, 5]]), 2.6)
+    box = Box(np.array([1.4, 2.1, 0.0]), np.array([2.0, 2.9, height]))
+    world = _world_chain(room, Furnishing(boxes=(box,)), ((3.2, 2.5, 1.3), 180.0, -8.0))
+    np.testing.assert_allclose(world[:, 0], 0.0, atol=0.05)
 
 
 @pytest.mark.parametrize(("x", "y", "yaw"), [(4.0, 1.3, 129.0), (3.8, 1.4, 125.0)])
