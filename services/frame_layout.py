@@ -26,7 +26,7 @@ from services.manhattan import estimate_manhattan_frame, thin_with_normals
 from services.rgbd import OPTICAL_TO_LEVEL, RgbdFrame, backproject
 from services.types import FloatArray, LocalLayout, ManhattanFrame, ProgressFn
 from services.wall_graph import find_wall_chain
-from services.wall_lines import MAX_DOORWAY, WallLine, find_wall_lines
+from services.wall_lines import MAX_DOORWAY, WallLine, find_wall_lines, offset_peaks
 
 _FLAT_COS = float(np.cos(np.radians(10.0)))  # a normal this close to +z: horizontal surface
 _SPACING = 0.03  # m, largest spacing of a frame's points at 4 m (sets the pixel stride)
@@ -45,7 +45,6 @@ _MIN_OPENING_COVER = 0.25  # least share of the view a wall with an opening fill
 _MAX_WALL_THICKNESS = 0.3  # m, deepest top or side of a wall's opening (furniture is deeper)
 _MIN_SURFACE_POINTS = 30  # fewer points than this make no surface (a tenth: no top or side)
 _NEAR_CAMERA = 0.3  # m, standing surfaces closer to the camera are not looked at
-_OFFSET_BIN = 0.05  # m, histogram bin of the nearer surface's offset
 _COLUMN_DEGREES = 2.0  # bin of the view's columns a surface shows up in
 
 __all__ = ["FrameCamera", "estimate_frame_layout", "estimate_rgbd_layout", "frame_points"]
@@ -107,10 +106,15 @@ def _floor(aligned: FloatArray, normals: FloatArray, params: PipelineParams) -> 
     return min(foot, -frame.camera_height)
 
 
+def _run_axis(step: FloatArray) -> int:
+    """The axis (0: x, 1: y) a floor-plan step along a Manhattan wall runs on."""
+    return 0 if abs(step[0]) >= abs(step[1]) else 1
+
+
 def _wall_line(lines: Sequence[WallLine], a: FloatArray, b: FloatArray) -> WallLine | None:
     """The candidate line the chain's wall from keypoint ``a`` to ``b`` runs on."""
     step = b - a
-    axis = 0 if abs(step[0]) >= abs(step[1]) else 1
+    axis = _run_axis(step)
     travel = 1 if step[axis] > 0 else -1
     offset = a[1 - axis]
     for line in lines:  # keypoints sit on their lines' offsets exactly
@@ -370,13 +374,6 @@ def _to_frustum_edges(
     return out
 
 
-def _strongest_offset(depth: FloatArray) -> float:
-    """The offset (m) most of ``depth`` (N,) cluster at: the densest 15 cm, its median."""
-    counts = np.bincount(np.floor(depth / _OFFSET_BIN).astype(np.int64))
-    peak = (int(np.argmax(np.convolve(counts, np.ones(3), mode="same"))) + 0.5) * _OFFSET_BIN
-    return float(np.median(depth[np.abs(depth - peak) < _ON_LINE]))
-
-
 def _wall_around_opening(
     keypoints: FloatArray,
     aligned: FloatArray,
@@ -397,9 +394,7 @@ def _wall_around_opening(
 
     keypoints: (2, 2) the chain; aligned, normals: (N, 3) the frame's points, aligned frame.
     """
-    axis = (
-        0 if abs(keypoints[1, 0] - keypoints[0, 0]) >= abs(keypoints[1, 1] - keypoints[0, 1]) else 1
-    )
+    axis = _run_axis(keypoints[1] - keypoints[0])
     across = 1 - axis
     centre = view.centre[:2]
     side = 1.0 if keypoints[0, across] > centre[across] else -1.0
@@ -410,7 +405,8 @@ def _wall_around_opening(
     nearer = facing & (depth > _NEAR_CAMERA) & (depth < far - _MAX_FURNITURE_DEPTH)
     if np.count_nonzero(nearer) < _MIN_SURFACE_POINTS:
         return None
-    offset = _strongest_offset(depth[nearer])
+    peak = float(offset_peaks(depth[nearer], 0.0)[0])  # the strongest
+    offset = float(np.median(depth[nearer & (np.abs(depth - peak) < _ON_LINE)]))
     surface = nearer & (np.abs(depth - offset) < _ON_LINE)
     # The share of the view's columns it shows up in (2-degree bins: a strided frame's
     # points leave some 1-degree bins empty at a meter or two).

@@ -197,7 +197,7 @@ def evidence_threshold(column_counts: NDArray[np.int64], band: float, params: La
     return max(3, round(n))
 
 
-def _offset_peaks(offsets: FloatArray, min_support: float) -> FloatArray:
+def offset_peaks(offsets: FloatArray, min_support: float) -> FloatArray:
     """Offsets of the walls: peaks of the smoothed offset histogram, strongest first."""
     if len(offsets) == 0:
         return np.zeros(0)
@@ -639,7 +639,7 @@ def find_wall_lines(
         facing = in_band & (np.abs(normals[:, offset_axis]) > _AXIS_COS)
         wall_points = aligned[facing]
         min_support = params.min_wall_cells * rule.n * 0.5
-        for peak in _offset_peaks(wall_points[:, offset_axis], min_support):
+        for peak in offset_peaks(wall_points[:, offset_axis], min_support):
             near = np.abs(wall_points[:, offset_axis] - peak) < _LINE_TOLERANCE
             members = wall_points[near]
             if len(members) == 0:
