@@ -6,7 +6,10 @@ counter-clockwise loop implies cuts the tree: a junction continues the wall or t
 degrees (never folds back), so a rotation follows from the junction's turn; the turns add
 up to one full turn; walls may not cross or overlap. A child's lower bound adds what its
 junction costs, the cheapest way into every piece still to place, the turns still owed and
-the closure gap the remaining pieces cannot make up; in a small site, with two pieces or
+the closure gap the remaining pieces cannot make up. Up to 16 pieces the junctions and turns
+still to come are bounded by the cheapest tour through the pieces left instead, where that
+is more (a table over every subset of pieces, built once per search: the cheapest ways into
+each piece may all come from one piece, a tour cannot); in a small site, with two pieces or
 fewer left after it, every way to finish the loop is tried instead (exact but for crossing
 walls, the hull and free space), so that fewer nodes near the leaves expand nothing. Quick
 first passes that expand only the best one, two, three children per node (iterative
@@ -74,6 +77,7 @@ _AWAY_FROM_START = -_CLOSURE_DIRECTIONS.T  # an end's distance from the start al
 _BROADENING = (1, 2, 3)  # children per node in the search's quick first passes
 _DFS_GROUP = 8  # children the depth-first search places at once (see _dfs)
 _LOOKAHEAD = 2  # pieces left after a child when its bound tries every way to finish (<= 2)
+_TOUR_PIECES = 16  # up to this many pieces the bounds hold the cheapest tour (2^15 x 16 x 4 table)
 _F = {name: k for k, name in enumerate(FEATURES)}
 
 
@@ -208,6 +212,14 @@ class _Search:
     @cached_property
     def finishing(self) -> _Finishing:
         return _finishing(self)
+
+    @cached_property
+    def tour(self) -> FloatArray | None:
+        """See :func:`_tour`; None where it would be too large or is not needed."""
+        n = len(self.pieces)
+        if not self.require_closed or not 3 <= n <= _TOUR_PIECES:
+            return None
+        return _tour(self)
 
     @cached_property
     def pairs(self) -> list[tuple[int, int, bool]]:
@@ -735,6 +747,15 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
     # The junction into the piece replaces the cheapest way into it counted in entry_total.
     ahead = weights[_F["turns"]] * turn_cost
     ahead += search.junction[last[parent], piece] + entry_total[parent] - into[parent, piece]
+    tour = search.tour
+    if tour is not None:
+        # The cheapest tour through the pieces left after the child and back to the start
+        # (junctions and turns), a bound of its own: the larger of the two holds.
+        bits = 1 << np.arange(n - 1)
+        after = (remaining[:, 1:] @ bits)[parent] & ~bits[piece - 1]
+        through = weights[_F["turns"]] * (turn != 0) + search.junction[last[parent], piece]
+        through += tour[after, piece, child_heading]
+        ahead = np.maximum(ahead, through)
     if search.require_closed:
         ahead += weights[_F["closure"]] * closure
     if search.finish_exactly:
@@ -762,6 +783,41 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
         floor_of_piece = search.rotation_floor[piece]
         bound += weights[_F["prior"]] * (own - prior_so_far[parent] - floor_of_piece)
     return _Children(parent, piece, turn, rotation, child_heading, child_end, bound, position)
+
+
+def _tour(search: _Search) -> FloatArray:
+    """[mask, l, h]: the least junction and turn energy of any tour that starts after piece
+    l, heading h, places every piece of ``mask`` (bit k: piece k + 1) once and closes into
+    the first piece; inf where none can. Walls crossing, closure and the turning number are
+    left out, so it bounds the energy still to come. Dynamic programming over the subsets,
+    by their number of pieces (a subset is reached from those one piece smaller)."""
+    n, w_turn = len(search.pieces), search.weights[_F["turns"]]
+    turns = np.array(_TURNS)
+    turn_cost = w_turn * (turns != 0)
+    # Heading after piece j entered at heading h with turn t: (n, 4, 3).
+    rotation = (np.arange(4)[None, :, None] + turns - search.first_direction[:, None, None]) % 4
+    heading_out = (search.last_direction[:, None, None] + rotation) % 4
+    first = search.pieces[0].directions[0]
+    closing = (first - np.arange(4)) % 4  # 0 continue, 1 left, 3 right, 2 folds back
+    close_cost = np.where(closing == 2, np.inf, w_turn * (closing != 0))
+    masks = np.arange(1 << (n - 1))
+    size = np.zeros(len(masks), dtype=np.intp)
+    for k in range(n - 1):
+        size += (masks >> k) & 1
+    tour = np.full((len(masks), n, 4), np.inf)
+    tour[0] = search.junction[:, 0, None] + close_cost[None, :]
+    for count in range(1, n):
+        layer = masks[size == count]
+        best = np.full((len(layer), n, 4), np.inf)
+        for k in range(n - 1):
+            rows = np.flatnonzero((layer >> k) & 1)  # the subsets holding piece j = k + 1
+            j = k + 1
+            # Entering j at heading h and turn t, then the cheapest tour of the rest, (m, 4, 3).
+            after = tour[layer[rows] ^ (1 << k), j][:, heading_out[j]] + turn_cost
+            into = search.junction[:, j, None] + after.min(axis=2)[:, None, :]  # (m, n, 4)
+            best[rows] = np.minimum(best[rows], into)
+        tour[layer] = best
+    return tour
 
 
 @dataclass(frozen=True)

@@ -244,6 +244,80 @@ def test_a_childs_bound_near_the_loops_end_is_its_best_leaf(monkeypatch, seed):
     assert checked > 5
 
 
+def _cheapest_tour(search, pieces_left, last, heading):
+    """Brute force of the tour table's entry: every order and turn of ``pieces_left`` after
+    piece ``last`` at ``heading``, junctions and turns only, closing into the first piece."""
+    w_turn = search.weights[search_module._F["turns"]]
+    first = search.pieces[0].directions[0]
+    best = np.inf
+    for order in itertools.permutations(pieces_left):
+        for turns in itertools.product(search_module._TURNS, repeat=len(order)):
+            cost, prev, h = 0.0, last, heading
+            for j, t in zip(order, turns, strict=True):
+                rotation = (h + t - search.first_direction[j]) % 4
+                cost += search.junction[prev, j] + w_turn * (t != 0)
+                prev, h = j, (search.last_direction[j] + rotation) % 4
+            closing = (first - h) % 4
+            if closing != 2:
+                best = min(best, cost + search.junction[prev, 0] + w_turn * (closing != 0))
+    return best
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_tour_table_holds_the_cheapest_tour(seed):
+    # Random structure scores make every junction cost differently; each entry is checked
+    # against every order and turn of its pieces.
+    rng = np.random.default_rng(seed)
+    rect = np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 4.0], [0.0, 4.0]])
+    pieces = chains_from_polygon(rect, [0.5, 3.0, 7.0, 11.0, 15.5], rng.integers(0, 4, 5).tolist())
+    params = GEOMETRY.model_copy(update={"use_structure": True})
+    search = _with_structure(
+        search_module._Search(pieces, params, SiteHints(), True), rng.uniform(-1.0, 0.0, (5, 5))
+    )
+    tour = search.tour
+    assert tour is not None and tour.shape == (16, 5, 4)
+    for mask in range(16):
+        left = [k + 1 for k in range(4) if mask >> k & 1]
+        for last in (k for k in range(5) if k not in left):
+            for heading in range(4):
+                expected = _cheapest_tour(search, left, last, heading)
+                assert tour[mask, last, heading] == pytest.approx(expected, abs=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_childs_bound_is_never_above_a_leaf_below_it(monkeypatch, seed):
+    # Far from the loop's end the bound holds the cheapest tour of the pieces left: it must
+    # stay a bound (each child against every closed leaf below it), and it must be the
+    # part of the bound that decides for some children, or this tests nothing new.
+    rng = np.random.default_rng(seed)
+    rect = np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 4.0], [0.0, 4.0]])
+    cuts = [0.5, 3.0, 6.5, 9.0, 12.5, 16.0]
+    pieces = chains_from_polygon(rect, cuts, rng.integers(0, 4, len(cuts)).tolist())
+    # One kept leaf, the best: what the bound is compared with.
+    params = GEOMETRY.model_copy(update={"energy_window": 1e9, "top_k": 1, "use_structure": True})
+    structure = rng.uniform(-1.0, 0.0, (len(cuts), len(cuts)))
+    search = _with_structure(search_module._Search(pieces, params, SiteHints(), True), structure)
+    without = _with_structure(search_module._Search(pieces, params, SiteHints(), True), structure)
+    monkeypatch.setattr(without, "tour", None)
+    root = search_module._root(search)
+    children = search_module._children(search, [root])
+    loose = search_module._children(without, [root]).bound
+    assert np.all(children.bound >= loose - 1e-12)
+    tighter = 0
+    for c in range(len(children.piece)):
+        j = int(children.piece[c])
+        child = search_module._extend(search, root, j, int(children.turn[c]))
+        if child is None:
+            continue
+        leaves = search_module._Search(pieces, params, SiteHints(), True)
+        rest = tuple(i for i in range(1, len(cuts)) if i != j)
+        _leaves_below(_with_structure(leaves, structure), child, rest)
+        best = min((-e for e, _, _ in leaves.top), default=np.inf)
+        assert children.bound[c] <= best + 1e-9
+        tighter += bool(children.bound[c] > loose[c] + 1e-9)
+    assert tighter > 0
+
+
 def _truth_priors(polygon, cuts, turns, rng=None, noise=(0.0, 0.0), frame=(0.5, (3.0, -1.0))):
     """Prior per piece from the truth: the piece made with ``turns[k]`` quarter turns sits
     turned back by them; the hints frame is the polygon's turned by frame[0], shifted."""
