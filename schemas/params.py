@@ -211,15 +211,15 @@ class PlacementParams(_Frozen):
         2_000, ge=1, description="search nodes of the fallback search for an open chain"
     )
     unexplored_energy: float = Field(
-        4.863,
+        4.818,
         description="energy above the best of the 'none of these' alternative (local layouts "
         "wrong, truth not found) in the confidence",
     )
     unexplored_per_piece: float = Field(
-        -0.357, description="change of that energy per piece (more pieces, more to go wrong)"
+        -0.32, description="change of that energy per piece (more pieces, more to go wrong)"
     )
     confidence_coefficients: tuple[float, ...] = Field(
-        (1.87, 1.303, 0.013, -0.347, -0.515, -0.376, 1.012),
+        (1.233, 1.385, 0.139, -0.433, -0.336, -0.186, -0.649),
         min_length=7,
         max_length=7,
         description="logistic calibration of the main room's probability over "
