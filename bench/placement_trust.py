@@ -423,8 +423,10 @@ def hints_table(
     sigma_yaw: float,
     rooms: str = "random rooms",
     params: PipelineParams = PipelineParams(),
+    record: list[Outcome] | None = None,
 ) -> Table:
-    """Priors alone against priors with the layouts, per bucket."""
+    """Priors alone against priors with the layouts, per bucket; each scene's outcome with
+    priors is appended to ``record`` when given."""
     title = (
         f"Hints ({rooms}): prior poses of {sigma_xy} m and {sigma_yaw} deg, alone and with "
         "the layouts"
@@ -450,6 +452,8 @@ def hints_table(
         alone = _prior_errors(scene, hints)
         outcome = run_scene(scene, params, hints)
         rows.setdefault(outcome.bucket, []).append((outcome, alone))
+        if record is not None:
+            record.append(outcome)
     for label in sorted(rows, key=lambda b: int(b.split("-")[0])):
         pairs = rows[label]
         outcomes = [o for o, _ in pairs]
@@ -500,6 +504,9 @@ def _arguments(argv: list[str] | None) -> argparse.Namespace:
     )
     parser.add_argument("--cues-scenes", type=int, default=60, help="0 to skip the AUC table")
     parser.add_argument("--dump", type=Path, help="write every scene's outcome to this JSON")
+    parser.add_argument(
+        "--dump-hints", type=Path, help="write every scene's outcome with priors to this JSON"
+    )
     add_params_option(parser)
     return parser.parse_args(argv)
 
@@ -543,12 +550,16 @@ def main(argv: list[str] | None = None) -> int:
     if args.ablation_per_bucket:
         console.print(ablation_table(_subset(scenes, args.ablation_per_bucket)))
     sigma_xy, sigma_yaw = args.hints_sigma
+    with_priors: list[Outcome] = []
     if args.hints_per_bucket:
         hinted = _subset(scenes, args.hints_per_bucket)
-        console.print(hints_table(hinted, sigma_xy, sigma_yaw, params=params))
+        console.print(hints_table(hinted, sigma_xy, sigma_yaw, params=params, record=with_priors))
     if args.hints_real:
         real_rooms = [s for s in scenes if s.name.endswith("_real")][: args.hints_real]
-        console.print(hints_table(real_rooms, sigma_xy, sigma_yaw, "real room shapes", params))
+        rooms = "real room shapes"
+        console.print(hints_table(real_rooms, sigma_xy, sigma_yaw, rooms, params, with_priors))
+    if args.dump_hints:
+        args.dump_hints.write_text(json.dumps([dataclasses.asdict(o) for o in with_priors]))
     console.print(f"total {(time.perf_counter() - started) / 60:.1f} min")
     return 0
 

@@ -10,7 +10,13 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from bench.placement_trust import Outcome, bucket_table, fragment_checks, overlap_table
+from bench.placement_trust import (
+    Outcome,
+    bucket_table,
+    fragment_checks,
+    hints_table,
+    overlap_table,
+)
 from bench.world_scenes import CachedScene
 from services.pipeline import estimate_layout
 from services.synthetic import SceneSpec, generate_scene, ground_truth_json
@@ -81,3 +87,10 @@ def test_bucket_table_gives_the_closed_results_right_share_with_its_interval() -
     # 49 of 50 closed right: 98.0 %, Wilson interval 89.5-99.6 %.
     assert "50: 98.0 (90-100)" in text
     assert "96.1 (87-99)" in text  # ACC_global: 49 of 51
+
+
+def test_hints_table_records_each_scenes_outcome_with_priors(scene: CachedScene) -> None:
+    record: list[Outcome] = []
+    table = hints_table([scene], 1.5, 20.0, record=record)
+    assert [(o.name, o.seed, o.n) for o in record] == [("unit", scene.seed, scene.n_fragments)]
+    assert table.row_count == 1  # one bucket
