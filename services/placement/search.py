@@ -791,15 +791,8 @@ def _tour(search: _Search) -> FloatArray:
     the first piece; inf where none can. Walls crossing, closure and the turning number are
     left out, so it bounds the energy still to come. Dynamic programming over the subsets,
     by their number of pieces (a subset is reached from those one piece smaller)."""
-    n, w_turn = len(search.pieces), search.weights[_F["turns"]]
-    turns = np.array(_TURNS)
-    turn_cost = w_turn * (turns != 0)
-    # Heading after piece j entered at heading h with turn t: (n, 4, 3).
-    rotation = (np.arange(4)[None, :, None] + turns - search.first_direction[:, None, None]) % 4
-    heading_out = (search.last_direction[:, None, None] + rotation) % 4
-    first = search.pieces[0].directions[0]
-    closing = (first - np.arange(4)) % 4  # 0 continue, 1 left, 3 right, 2 folds back
-    close_cost = np.where(closing == 2, np.inf, w_turn * (closing != 0))
+    n, steps = len(search.pieces), search.finishing  # the headings and turns' costs per step
+    close_cost = np.where(steps.close_gain == 99, np.inf, steps.close_cost)  # 99: folds back
     masks = np.arange(1 << (n - 1))
     size = np.zeros(len(masks), dtype=np.intp)
     for k in range(n - 1):
@@ -813,7 +806,7 @@ def _tour(search: _Search) -> FloatArray:
             rows = np.flatnonzero((layer >> k) & 1)  # the subsets holding piece j = k + 1
             j = k + 1
             # Entering j at heading h and turn t, then the cheapest tour of the rest, (m, 4, 3).
-            after = tour[layer[rows] ^ (1 << k), j][:, heading_out[j]] + turn_cost
+            after = tour[layer[rows] ^ (1 << k), j][:, steps.heading[:, j]] + steps.cost[j]
             into = search.junction[:, j, None] + after.min(axis=2)[:, None, :]  # (m, n, 4)
             best[rows] = np.minimum(best[rows], into)
         tour[layer] = best
