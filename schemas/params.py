@@ -110,6 +110,16 @@ class PlacementParams(_Frozen):
     weight_conflict: float = Field(
         0.624, ge=0, description="energy per meter of wall through another scan's seen space"
     )
+    conflict_drift_sigmas: float = Field(
+        1.0,
+        ge=0,
+        description="with prior poses, a wall counts as through another scan's seen space "
+        "only this many standard deviations of the junctions' hidden displacement between "
+        "the two pieces deep inside it, each moved by that displacement's mean (0: at any "
+        "depth). Without priors every wall counts where the end-to-end loop puts it: there "
+        "the far pieces' conflict is what tells many wrong rooms, and forgiving it lost "
+        "rooms on both splits (bench.placement_trust)",
+    )
     weight_outside: float = Field(
         3.844, ge=0, description="energy per m² of seen floor the closed room leaves outside"
     )

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-from scipy.ndimage import binary_erosion
+from scipy.ndimage import binary_erosion, distance_transform_edt
 
 from services.types import Evidence, FloatArray, LocalLayout
 
@@ -143,15 +143,25 @@ class FreeSpace:
         """(x_lo, y_lo, x_hi, y_hi) of the free cells, as floats for quick tests."""
         return (float(self.lo[0]), float(self.lo[1]), float(self.hi[0]), float(self.hi[1]))
 
-    def hits(self, xy: FloatArray) -> int:
-        """How many of the (M, 2) points (this grid's frame) fall in free cells."""
+    @cached_property
+    def depth(self) -> FloatArray:
+        """(I, J) how far each free cell's centre lies inside the free space (from the
+        nearest cell not free, centre to centre), m; 0 outside it."""
+        depth: FloatArray = distance_transform_edt(self.grid) * self.cell
+        return depth
+
+    def hits(self, xy: FloatArray, margin: float | FloatArray = 0.0) -> int:
+        """How many of the (M, 2) points (this grid's frame) fall in free cells more than
+        ``margin`` (m, one or (M,)) inside the free space."""
         if len(xy) == 0 or self.grid.size == 0:
             return 0
         ij = ((xy - self.origin) * (1.0 / self.cell)).astype(np.int64)
         # Points outside the grid clip onto its border rows and columns, which are never
         # free (the footprint has a cell margin and erosion clears the border).
         flat = np.ravel_multi_index((ij[:, 0], ij[:, 1]), self.grid.shape, mode="clip")
-        return int(np.count_nonzero(self.grid.ravel().take(flat)))
+        if isinstance(margin, float) and margin <= 0.0:
+            return int(np.count_nonzero(self.grid.ravel().take(flat)))
+        return int(np.count_nonzero(self.depth.ravel().take(flat) > margin))
 
 
 @dataclass(frozen=True)

@@ -348,6 +348,12 @@ class _State:
     walls: FloatArray
     vertices: FloatArray
     samples: FloatArray  # (S, 2) site-frame wall samples of the placed pieces
+    # With prior poses (for the conflict test): each sample's piece as its place in
+    # ``order``, (S,); the hidden displacement at each placed piece's source, mean and
+    # variance, (m, 2) each.
+    owners: NDArray[np.int64]
+    drift_means: FloatArray
+    drift_vars: FloatArray
     box: Box  # their bounds (x_lo, y_lo, x_hi, y_hi)
     violated: tuple[int, ...] = ()  # indices of broken hint pairs
     resolved: frozenset[int] = frozenset()  # hint pairs already decided
@@ -397,26 +403,65 @@ def _conflict(
     rotation: int,
     samples: FloatArray,
     box: Box,
+    drift: tuple[FloatArray, FloatArray],
 ) -> float:
     """Meters of wall through space another scan saw empty, for piece j joining the state.
 
     j's walls (``samples``, site frame, bounded by ``box``) are tested against every placed
     piece's free space and the placed walls against j's, each in the piece's own frame
-    (rotate back, shift back).
+    (rotate back, shift back). ``drift``: mean and variance (2,) of the junctions' hidden
+    displacement at j's source. With prior poses, two pieces many junctions apart on the
+    loop are placed less surely relative to each other: each is moved by the mean drift
+    between them, and a wall counts only deeper than ``conflict_drift_sigmas`` of that
+    drift's spread inside the other's free space: end to end from the most certain prior's
+    piece, a true room's far walls can drift meters deep into seen space. Without priors
+    every wall counts where the end-to-end loop puts it; forgiving the drift there lost
+    rooms, refitted weights or not (README, *Accuracy and speed*).
     """
     hits = 0
-    x0, y0, x1, y1 = box
-    for index, turn, source in zip(state.order, state.rotations, state.sources, strict=True):
+    count = len(state.order)
+    shifts: FloatArray | list[FloatArray] = [_NO_SHIFT] * count
+    margins = [0.0] * count  # no prior poses: every wall at its end-to-end place
+    if search.frame is not None:
+        # Each placed piece relative to j: moved by the mean drift between them, and its
+        # walls or free space counted only beyond a margin of that drift's spread.
+        mean_j, var_j = drift
+        shifts = state.drift_means - mean_j
+        spread = np.sqrt(np.maximum(var_j - state.drift_vars, 0.0).max(axis=1))
+        margins = (search.params.conflict_drift_sigmas * spread).tolist()
+    placed = zip(state.order, state.rotations, state.sources, shifts, margins, strict=True)
+    for index, turn, source, shift, margin in placed:
         free = search.pieces[index].rotated_free[turn]
-        (fx0, fy0, fx1, fy1), (sx, sy) = free.box, source.tolist()
-        if x0 <= fx1 + sx and x1 >= fx0 + sx and y0 <= fy1 + sy and y1 >= fy0 + sy:
-            hits += free.hits(samples - source)
+        at = source + shift
+        if _meets(box, free.box, at):
+            hits += free.hits(samples - at, margin)
     free = search.pieces[j].rotated_free[rotation]
-    (fx0, fy0, fx1, fy1), (ex, ey) = free.box, state.end.tolist()
     x0, y0, x1, y1 = state.box
-    if x0 <= fx1 + ex and x1 >= fx0 + ex and y0 <= fy1 + ey and y1 >= fy0 + ey:
-        hits += free.hits(state.samples - state.end)
+    if search.frame is None:
+        if _meets(state.box, free.box, state.end):
+            hits += free.hits(state.samples - state.end)
+    else:
+        shift = np.asarray(shifts)
+        pad = float(np.abs(shift).max())  # how far a placed sample moves at most
+        if _meets((x0 - pad, y0 - pad, x1 + pad, y1 + pad), free.box, state.end):
+            owners = state.owners
+            moved = state.samples + shift[owners] - state.end
+            hits += free.hits(moved, np.asarray(margins)[owners])
     return hits * SAMPLE_SPACING
+
+
+def _meets(box: Box, free: Box, at: FloatArray) -> bool:
+    """True when ``box`` overlaps the box ``free`` moved to ``at``."""
+    ax, ay = float(at[0]), float(at[1])
+    return (
+        box[0] <= free[2] + ax
+        and box[2] >= free[0] + ax
+        and box[1] <= free[3] + ay
+        and box[3] >= free[1] + ay
+    )
+
+
+_NO_SHIFT = np.zeros(2)
 
 
 def _union(a: Box, b: Box) -> Box:
@@ -474,7 +519,8 @@ def _extend(
     x0, y0, x1, y1 = piece.sample_boxes[rotation]
     ex, ey = state.end.tolist()
     box = (x0 + ex, y0 + ey, x1 + ex, y1 + ey)
-    features[_F["conflict"]] += _conflict(search, state, j, rotation, samples, box)
+    drift = (drift_mean, drift_var)
+    features[_F["conflict"]] += _conflict(search, state, j, rotation, samples, box, drift)
     rotations_cost = state.rotation_prior + search.turned_rotation_cost[j, rotation]
     anchor = _anchor(search, j, state.end, drift_mean, drift_var)
     anchors = state.anchors if anchor is None else (*state.anchors, anchor)
@@ -484,6 +530,11 @@ def _extend(
         position = position_costs(anchors)
     if search.frame is not None:
         features[_F["prior"]] = float((rotations_cost + position).min())
+    owners, drift_means, drift_vars = state.owners, state.drift_means, state.drift_vars
+    if search.frame is not None:  # only the priors' conflict test reads them
+        owners = np.concatenate([owners, np.full(len(samples), len(state.order))])
+        drift_means = np.vstack([drift_means, drift_mean])
+        drift_vars = np.vstack([drift_vars, drift_var])
     child = _State(
         order=(*state.order, j),
         rotations=(*state.rotations, rotation),
@@ -497,6 +548,9 @@ def _extend(
         walls=np.concatenate([state.walls, walls]),
         vertices=np.concatenate([state.vertices, pts]),
         samples=np.concatenate([state.samples, samples]),
+        owners=owners,
+        drift_means=drift_means,
+        drift_vars=drift_vars,
         box=_union(state.box, box),
         violated=state.violated,
         resolved=state.resolved,
@@ -969,6 +1023,9 @@ def _root(search: _Search) -> _State:
         walls=trimmed,
         vertices=pts.copy(),
         samples=samples,
+        owners=np.zeros(len(samples), dtype=np.int64),
+        drift_means=np.zeros((1, 2)),
+        drift_vars=np.zeros((1, 2)),
         box=first.sample_boxes[0],
         rotation_prior=rotation_prior,
         anchors=tuple(

@@ -275,3 +275,21 @@ def test_piece_rotations_are_consistent():
         assert np.allclose(walls, walls_of(points))
         assert len(samples) == len(wall_samples(piece.keypoints))
         assert piece.rotated_free[turn].hits(samples) == 0  # own walls are never in own space
+
+
+def test_a_margin_counts_only_points_that_deep_inside_the_free_space():
+    free = _room_piece().free
+    rng = np.random.default_rng(7)
+    points = rng.uniform(-1.0, 5.0, size=(400, 2))
+    assert free.hits(points, 0.0) == free.hits(points)
+    # The core of the seen floor is about a meter from its rim, the rim a cell from it.
+    core, rim = np.array([[2.0, 2.0]]), np.array([[0.45, 2.0]])
+    assert free.hits(core, 0.6) == 1 and free.hits(rim, 0.0) == 1
+    assert free.hits(rim, 0.6) == 0
+    assert free.hits(points, 0.6) < free.hits(points)
+    # One margin per point: the same as asking for each point alone.
+    margins = rng.uniform(0.0, 1.5, size=len(points))
+    one_by_one = sum(free.hits(p[None], float(m)) for p, m in zip(points, margins, strict=True))
+    assert free.hits(points, margins) == one_by_one
+    for turn in range(4):
+        assert free.rotated(turn).hits(points @ rot90(turn).T, margins) == one_by_one

@@ -621,6 +621,53 @@ def _seeing_floor(piece: Piece, room: np.ndarray, source: np.ndarray, reach: flo
     return dataclasses.replace(piece, free=free)
 
 
+HALL = np.array([[0, 0], [12, 0], [12, 6], [0, 6]], dtype=np.float64)
+
+
+def _hall_piece(piece: Piece, source: np.ndarray, gap: float) -> Piece:
+    """A piece of the 12 x 6 m hall that saw the whole floor (0.4 m clear of the walls),
+    its chain ``gap`` short at its end: the next scan starts that far on."""
+    cell = 0.25
+    xs, ys = np.meshgrid(np.arange(0.5, 11.5, cell), np.arange(0.5, 5.5, cell))
+    seen = np.column_stack([xs.ravel(), ys.ravel()]) + cell / 2 - source
+    origin = seen.min(axis=0) - 1.5 * cell
+    ij = np.floor((seen - origin) / cell).astype(int)
+    grid = np.zeros(tuple(ij.max(axis=0) + 2), dtype=bool)
+    grid[ij[:, 0], ij[:, 1]] = True
+    free = FreeSpace(grid, origin, cell, seen.min(axis=0) - cell, seen.max(axis=0) + cell)
+    keypoints = piece.keypoints.copy()
+    last = keypoints[-1] - keypoints[-2]
+    keypoints[-1] -= gap * last / np.linalg.norm(last)
+    return dataclasses.replace(piece, keypoints=keypoints, free=free)
+
+
+@pytest.mark.parametrize("gap", [0.0, 0.2, 1.0])
+def test_with_priors_free_space_forgives_the_drift_the_junctions_explain(gap):
+    # Twelve scans of a hall, each junction hiding a gap. Placed end to end, the far
+    # pieces drift into the space the first ones saw empty: by less than the junctions'
+    # spread (0.3 m each) at 0.2 m, which is not a contradiction; far more at 1 m.
+    cuts = [1.5 + 3.0 * k for k in range(12)]
+    pieces = chains_from_polygon(HALL, cuts, [0] * 12)
+    pieces = [_hall_piece(p, point_at_arc(HALL, c), gap) for p, c in zip(pieces, cuts, strict=True)]
+    params = UNTUNED.model_copy(update={"use_boundary": False, "use_structure": False})
+    exact = params.model_copy(update={"conflict_drift_sigmas": 0.0})
+    priors = _truth_priors(HALL, cuts, [0] * 12)
+    order, rotations = [p.id for p in pieces], [0] * 12
+    forgiving = evaluate_placement(pieces, order, rotations, params, priors)
+    strict = evaluate_placement(pieces, order, rotations, exact, priors)
+    # Without priors every wall counts where the end-to-end loop puts it (see the param).
+    unhinted = evaluate_placement(pieces, order, rotations, params)
+    assert forgiving is not None and strict is not None and unhinted is not None
+    assert unhinted.features["conflict"] == strict.features["conflict"]
+    if gap == 0.0:
+        assert strict.features["conflict"] == forgiving.features["conflict"] == 0.0
+    elif gap < 0.3:
+        assert strict.features["conflict"] > 10.0
+        assert forgiving.features["conflict"] == 0.0
+    else:
+        assert forgiving.features["conflict"] > 10.0
+
+
 @pytest.mark.parametrize("use_outside", [True, False])
 def test_floor_seen_outside_breaks_the_tie_of_two_rooms(l_room, use_outside):
     # The tied L room's swapped assembly leaves floor a scan saw outside its walls.
