@@ -348,10 +348,8 @@ class _State:
     walls: FloatArray
     vertices: FloatArray
     samples: FloatArray  # (S, 2) site-frame wall samples of the placed pieces
-    # With prior poses (for the conflict test): each sample's piece as its place in
-    # ``order``, (S,); the hidden displacement at each placed piece's source, mean and
-    # variance, (m, 2) each.
-    owners: NDArray[np.int64]
+    # With prior poses (for the conflict test): the hidden displacement at each placed
+    # piece's source, mean and variance, (m, 2) each.
     drift_means: FloatArray
     drift_vars: FloatArray
     box: Box  # their bounds (x_lo, y_lo, x_hi, y_hi)
@@ -420,33 +418,34 @@ def _conflict(
     """
     hits = 0
     count = len(state.order)
-    shifts: FloatArray | list[FloatArray] = [_NO_SHIFT] * count
-    margins = [0.0] * count  # no prior poses: every wall at its end-to-end place
+    shifts, margins = np.zeros((count, 2)), np.zeros(count)  # without priors: none
     if search.frame is not None:
         # Each placed piece relative to j: moved by the mean drift between them, and its
         # walls or free space counted only beyond a margin of that drift's spread.
         mean_j, var_j = drift
         shifts = state.drift_means - mean_j
         spread = np.sqrt(np.maximum(var_j - state.drift_vars, 0.0).max(axis=1))
-        margins = (search.params.conflict_drift_sigmas * spread).tolist()
-    placed = zip(state.order, state.rotations, state.sources, shifts, margins, strict=True)
+        margins = search.params.conflict_drift_sigmas * spread
+    placed = zip(state.order, state.rotations, state.sources, shifts, margins.tolist(), strict=True)
     for index, turn, source, shift, margin in placed:
         free = search.pieces[index].rotated_free[turn]
         at = source + shift
         if _meets(box, free.box, at):
             hits += free.hits(samples - at, margin)
     free = search.pieces[j].rotated_free[rotation]
+    placed_samples = state.samples
+    placed_margins: FloatArray | float = 0.0  # a float: the plain free-cell test
+    if search.frame is not None:
+        sizes = [
+            len(search.pieces[i].rotated[r][2])
+            for i, r in zip(state.order, state.rotations, strict=True)
+        ]
+        owners = np.repeat(np.arange(count), sizes)  # each sample's place in the order
+        placed_samples, placed_margins = state.samples + shifts[owners], margins[owners]
+    pad = float(np.abs(shifts).max())  # how far a placed sample moves at most
     x0, y0, x1, y1 = state.box
-    if search.frame is None:
-        if _meets(state.box, free.box, state.end):
-            hits += free.hits(state.samples - state.end)
-    else:
-        shift = np.asarray(shifts)
-        pad = float(np.abs(shift).max())  # how far a placed sample moves at most
-        if _meets((x0 - pad, y0 - pad, x1 + pad, y1 + pad), free.box, state.end):
-            owners = state.owners
-            moved = state.samples + shift[owners] - state.end
-            hits += free.hits(moved, np.asarray(margins)[owners])
+    if _meets((x0 - pad, y0 - pad, x1 + pad, y1 + pad), free.box, state.end):
+        hits += free.hits(placed_samples - state.end, placed_margins)
     return hits * SAMPLE_SPACING
 
 
@@ -459,9 +458,6 @@ def _meets(box: Box, free: Box, at: FloatArray) -> bool:
         and box[1] <= free[3] + ay
         and box[3] >= free[1] + ay
     )
-
-
-_NO_SHIFT = np.zeros(2)
 
 
 def _union(a: Box, b: Box) -> Box:
@@ -530,9 +526,8 @@ def _extend(
         position = position_costs(anchors)
     if search.frame is not None:
         features[_F["prior"]] = float((rotations_cost + position).min())
-    owners, drift_means, drift_vars = state.owners, state.drift_means, state.drift_vars
+    drift_means, drift_vars = state.drift_means, state.drift_vars
     if search.frame is not None:  # only the priors' conflict test reads them
-        owners = np.concatenate([owners, np.full(len(samples), len(state.order))])
         drift_means = np.vstack([drift_means, drift_mean])
         drift_vars = np.vstack([drift_vars, drift_var])
     child = _State(
@@ -548,7 +543,6 @@ def _extend(
         walls=np.concatenate([state.walls, walls]),
         vertices=np.concatenate([state.vertices, pts]),
         samples=np.concatenate([state.samples, samples]),
-        owners=owners,
         drift_means=drift_means,
         drift_vars=drift_vars,
         box=_union(state.box, box),
@@ -1023,7 +1017,6 @@ def _root(search: _Search) -> _State:
         walls=trimmed,
         vertices=pts.copy(),
         samples=samples,
-        owners=np.zeros(len(samples), dtype=np.int64),
         drift_means=np.zeros((1, 2)),
         drift_vars=np.zeros((1, 2)),
         box=first.sample_boxes[0],
