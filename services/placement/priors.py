@@ -15,6 +15,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import NDArray
 
 from schemas.hints import FragmentPrior
 from services.types import FloatArray, LocalLayout
@@ -231,27 +232,50 @@ def position_costs(anchors: Sequence[tuple[float, float, float, float, float]]) 
     return costs
 
 
-def position_costs_batch(anchors: FloatArray) -> FloatArray:
-    """:func:`position_costs` of B sets of k anchors at once: (B, k, 5) -> (B, 4).
+def position_costs_batch(
+    anchors: FloatArray, quarters: NDArray[np.intp] | None = None
+) -> FloatArray:
+    """:func:`position_costs` of B sets of k anchors at once: (B, k, 5) -> (B, 4); with
+    ``quarters`` (B,), only that quarter turn of the frame per set: (B,).
 
     >>> one = [(0.0, 0.0, 0.0, 0.0, 1.0), (2.0, 0.0, 2.0, 0.0, 1.0)]
     >>> costs = position_costs_batch(np.array([one, one]))
     >>> costs.shape, bool(np.allclose(costs[1], position_costs(one)))
     ((2, 4), True)
+    >>> bool(np.array_equal(position_costs_batch(np.array([one]), np.array([2])), costs[:1, 2]))
+    True
     """
-    w = anchors[:, None, :, 4]  # (B, 1, k)
-    # (B, 4, k, 2): prior less placed source under each quarter turn of the frame, x and y
-    # apart (small arrays: fewer, simpler operations are what costs time here).
     placed = anchors[:, :, 2:4]
-    dx = (anchors[:, :, 0:1] - placed @ _QUARTER_X.T).transpose(0, 2, 1)
-    dy = (anchors[:, :, 1:2] - placed @ _QUARTER_Y.T).transpose(0, 2, 1)
-    stacked = np.stack([dx, dy, np.ones(dx.shape)], axis=-1)  # (B, 4, k, 3)
+    if quarters is None:
+        # (B, 4, k): prior less placed source under each quarter turn of the frame.
+        dx = (anchors[:, :, 0:1] - placed @ _QUARTER_X.T).transpose(0, 2, 1)
+        dy = (anchors[:, :, 1:2] - placed @ _QUARTER_Y.T).transpose(0, 2, 1)
+        b, k = dx.shape[0], dx.shape[2]
+        # Fitted one quarter turn per row, as below: a set's costs are then the same to the
+        # last bit whether its four quarter turns are costed at once or one by one.
+        w = np.repeat(anchors[:, None, :, 4], 4, axis=0)
+        costs: FloatArray = _robust_fit(dx.reshape(-1, 1, k), dy.reshape(-1, 1, k), w)
+        return costs.reshape(b, 4)
+    # (B, 1, k): the quarter-turn matrices hold only 0 and 1 in magnitude, so the turned
+    # sources are exactly those of the four at once.
+    turned_x = (placed * _QUARTER_X[quarters][:, None, :]).sum(axis=2)
+    turned_y = (placed * _QUARTER_Y[quarters][:, None, :]).sum(axis=2)
+    dx, dy = (anchors[:, :, 0] - turned_x)[:, None], (anchors[:, :, 1] - turned_y)[:, None]
+    single: FloatArray = _robust_fit(dx, dy, anchors[:, None, :, 4])[:, 0]
+    return single
+
+
+def _robust_fit(dx: FloatArray, dy: FloatArray, w: FloatArray) -> FloatArray:
+    """Robust cost (B, Q) of the misfits dx, dy (B, Q, k) of k anchors weighing w (B, 1, k)
+    once the best shift between the frames is taken out (reweighted least squares)."""
+    # Small arrays: fewer, simpler operations are what costs time here.
+    stacked = np.stack([dx, dy, np.ones(dx.shape)], axis=-1)  # (B, Q, k, 3)
     squared = dx * dx + dy * dy
     c = np.ones(dx.shape)
     misfit = c
     for _ in range(_REWEIGHTS):
         # Weighted sums of dx, dy and the weights in one product: the fitted shift (mx, my).
-        sums = (c * w)[:, :, None, :] @ stacked  # (B, 4, 1, 3)
+        sums = (c * w)[:, :, None, :] @ stacked  # (B, Q, 1, 3)
         mx, my = sums[..., 0] / sums[..., 2], sums[..., 1] / sums[..., 2]
         misfit = w * (squared - 2.0 * (dx * mx + dy * my) + mx * mx + my * my)
         c = _cauchy_weights(misfit)

@@ -15,6 +15,7 @@ from services.placement.priors import (
     frame_estimate,
     hint_pairs,
     piece_prior,
+    position_costs_batch,
     robust_cost,
     wrap_angle,
 )
@@ -189,3 +190,20 @@ def test_frame_estimate_takes_the_axis_from_every_prior_and_the_turn_from_the_fi
     assert math.degrees(frame.yaw) == pytest.approx(-2.5)  # the first piece's quarter turn
     assert frame.variance == pytest.approx(0.35**2 / 6)
     assert frame_estimate("absent", priors) is None
+
+
+def test_position_costs_of_one_quarter_turn_are_those_of_all_four_to_the_last_bit():
+    # The search fits only the quarter turns that can be a child's least: their costs
+    # must be the very numbers the four at once give, padding rows of zero weight included.
+    rng = np.random.default_rng(7)
+    anchors = rng.normal(0.0, 3.0, (40, 6, 5))
+    anchors[..., 4] = rng.uniform(0.05, 2.0, (40, 6))
+    anchors[:, :2, 4] = 0.0
+    every = position_costs_batch(anchors)
+    assert every.shape == (40, 4)
+    quarters = rng.integers(0, 4, 40)
+    assert np.array_equal(position_costs_batch(anchors, quarters), every[np.arange(40), quarters])
+    some = np.array([3, 17, 29])
+    assert np.array_equal(
+        position_costs_batch(anchors[some], quarters[some]), every[some, quarters[some]]
+    )

@@ -20,7 +20,7 @@ from services.placement import (
 )
 from services.placement import search as search_module
 from services.placement.pieces import FreeSpace
-from services.placement.priors import HintPair, PiecePrior
+from services.placement.priors import HintPair, PiecePrior, position_costs_batch
 from tests.conftest import UNTUNED, bare_piece, chains_from_polygon, point_at_arc
 
 pytestmark = pytest.mark.timeout(120)
@@ -182,12 +182,48 @@ def test_a_childs_bound_holds_its_own_prior_exactly(l_room):
         assert valid
         for k, child in valid.items():
             assert own[k] == pytest.approx(child.features[prior], abs=1e-9)
-            assert positions[k] == pytest.approx(child.position, abs=1e-9)
+            # Quarter turns that cannot be the least keep a lower bound (the parent's).
+            assert np.all(positions[k] <= child.position + 1e-9)
+            least = np.argmin(positions[k] + child.rotation_prior)
+            assert positions[k][least] == pytest.approx(child.position[least], abs=1e-9)
             assert children.end[k] == pytest.approx(child.end, abs=1e-12)
             assert children.heading[k] == child.heading
             assert children.rotation[k] == child.rotations[-1]
         state = valid[min(valid, key=lambda k: own[k])]
     assert state.features[prior] > 0.0
+
+
+def test_an_anchor_is_its_row_of_the_batch_to_the_last_bit(l_room):
+    # One piece's anchor (each extension) and the batch's rows (each child's bound) must
+    # agree exactly: the position costs of both are compared and stored as one.
+    pieces, hints = _cut_with_priors(l_room, 3, 6, noise=(0.8, 0.2))
+    search = search_module._Search(pieces, GEOMETRY, hints, True)
+    rng = np.random.default_rng(5)
+    js = np.arange(1, len(pieces))
+    sources = rng.normal(0.0, 4.0, (len(js), 2))
+    means, variances = rng.normal(0.0, 0.3, (len(js), 2)), rng.uniform(0.0, 0.4, (len(js), 2))
+    rows = search_module._anchor_rows(search, js, sources, means, variances)
+    for k, j in enumerate(js.tolist()):
+        anchor = search_module._anchor(search, j, sources[k], means[k], variances[k])
+        assert anchor == tuple(rows[k].tolist())
+
+
+@pytest.mark.parametrize("seed", [3, 11])
+def test_bounded_position_costs_leave_the_search_unchanged(l_room, seed, monkeypatch):
+    # Quarter turns of the frame that cannot be a child's least keep their parent's cost
+    # as a bound instead of being fitted: the search must return exactly what it returns
+    # with every quarter turn fitted.
+    pieces, hints = _cut_with_priors(l_room, seed, 7, noise=(1.5, math.radians(20.0)))
+    bounded = place_pieces(pieces, GEOMETRY, hints)
+    monkeypatch.setattr(
+        search_module, "_least_position_costs", lambda anchors, *_: position_costs_batch(anchors)
+    )
+    fitted = place_pieces(pieces, GEOMETRY, hints)
+    assert bounded is not None and fitted is not None
+    assert bounded.nodes_searched == fitted.nodes_searched
+    assert [(c.order, c.rotations, c.energy) for c in bounded.candidates] == [
+        (c.order, c.rotations, c.energy) for c in fitted.candidates
+    ]
 
 
 def _leaves_below(search, state, remaining):
