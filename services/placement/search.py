@@ -26,7 +26,7 @@ from __future__ import annotations
 import heapq
 import itertools
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 
@@ -838,12 +838,22 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
     if search.frame is not None:
         # The child's own prior is known exactly: it replaces the state's and the floor
         # counted for its piece's rotation.
-        own, position = _child_priors(
-            search, states, parent, piece, rotation, ends[parent], drift_mean, drift_var
-        )
         prior_so_far = np.array([s.features[_F["prior"]] for s in states])
         floor_of_piece = search.rotation_floor[piece]
-        bound += weights[_F["prior"]] * (own - prior_so_far[parent] - floor_of_piece)
+
+        def with_own(own: FloatArray, rows: NDArray[np.intp] | slice = slice(None)) -> FloatArray:
+            """The bound of children ``rows`` with prior feature ``own``: it replaces the
+            state's and the floor counted for the piece's rotation."""
+            counted = prior_so_far[parent[rows]]
+            out: FloatArray = bound[rows] + weights[_F["prior"]] * (
+                own - counted - floor_of_piece[rows]
+            )
+            return out
+
+        own, position = _child_priors(
+            search, states, parent, piece, rotation, ends[parent], drift_mean, drift_var, with_own
+        )
+        bound = with_own(own)
     return _Children(parent, piece, turn, rotation, child_heading, child_end, bound, position)
 
 
@@ -984,17 +994,27 @@ def _child_priors(
     source: FloatArray,
     drift_mean: FloatArray,
     drift_var: FloatArray,
+    bound: Callable[[FloatArray, NDArray[np.intp]], FloatArray] | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """The prior feature of each child (piece[c] at rotation[c], its source at source[c],
     the end of states[parent[c]], with the hidden displacement drift_mean[c] and
     drift_var[c] up to it), as :func:`_extend` computes it: rotation costs and position
     costs (see :func:`_anchor`), the least over the frame's quarter turns; and the position
-    costs per quarter turn (C, 4)."""
+    costs per quarter turn (C, 4).
+
+    ``bound``: the bound of children (indices) given their prior feature. A child whose
+    bound reaches the search's threshold even with its parent's position costs (lower
+    bounds) is cut whatever its own are (the threshold never rises), so they are not
+    fitted: its prior feature and costs are then those bounds."""
     rotation_prior = np.array([s.rotation_prior for s in states]).reshape(-1, 4)
     costs = rotation_prior[parent] + search.turned_rotation_cost[piece, rotation]
     position = np.array([s.position for s in states]).reshape(-1, 4)[parent]
     anchored = np.array([len(s.anchors) for s in states], dtype=np.intp)
     chosen = np.flatnonzero(search.has_prior[piece] & (anchored[parent] > 0))
+    threshold = search.threshold()
+    if bound is not None and len(chosen) and threshold < np.inf:
+        least = (costs[chosen] + position[chosen]).min(axis=1)
+        chosen = chosen[bound(least, chosen) < threshold]
     if len(chosen):
         # Every child's anchors in one (m, k + 1, 5) batch: a state's own anchors, rows of
         # zero weight (which cost nothing and move no fit) up to the most any state has,

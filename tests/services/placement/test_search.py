@@ -210,13 +210,24 @@ def test_an_anchor_is_its_row_of_the_batch_to_the_last_bit(l_room):
 
 @pytest.mark.parametrize("seed", [3, 11])
 def test_bounded_position_costs_leave_the_search_unchanged(l_room, seed, monkeypatch):
-    # Quarter turns of the frame that cannot be a child's least keep their parent's cost
-    # as a bound instead of being fitted: the search must return exactly what it returns
-    # with every quarter turn fitted.
+    # Quarter turns of the frame that cannot be a child's least, and children whose bound
+    # reaches the threshold with their parent's costs, keep those costs as bounds instead
+    # of being fitted: the search must return exactly what it returns with every quarter
+    # turn of every child fitted, for fewer fits.
     pieces, hints = _cut_with_priors(l_room, seed, 7, noise=(1.5, math.radians(20.0)))
+    fits = []
+
+    def counted(anchors, quarters=None):
+        fits.append(len(anchors) * (4 if quarters is None else 1))
+        return position_costs_batch(anchors, quarters)
+
+    monkeypatch.setattr(search_module, "position_costs_batch", counted)
     bounded = place_pieces(pieces, GEOMETRY, hints)
+    bounded_fits, fits[:] = sum(fits), []
+    child_priors = search_module._child_priors
+    monkeypatch.setattr(search_module, "_child_priors", lambda *args: child_priors(*args[:8]))
     monkeypatch.setattr(
-        search_module, "_least_position_costs", lambda anchors, *_: position_costs_batch(anchors)
+        search_module, "_least_position_costs", lambda anchors, *_: counted(anchors)
     )
     fitted = place_pieces(pieces, GEOMETRY, hints)
     assert bounded is not None and fitted is not None
@@ -224,6 +235,7 @@ def test_bounded_position_costs_leave_the_search_unchanged(l_room, seed, monkeyp
     assert [(c.order, c.rotations, c.energy) for c in bounded.candidates] == [
         (c.order, c.rotations, c.energy) for c in fitted.candidates
     ]
+    assert bounded_fits < sum(fits) / 2
 
 
 def _leaves_below(search, state, remaining):
