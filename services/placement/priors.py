@@ -245,19 +245,14 @@ def position_costs_batch(
     >>> bool(np.array_equal(position_costs_batch(np.array([one]), np.array([2])), costs[:1, 2]))
     True
     """
-    placed = anchors[:, :, 2:4]
     if quarters is None:
-        # (B, 4, k): prior less placed source under each quarter turn of the frame.
-        dx = (anchors[:, :, 0:1] - placed @ _QUARTER_X.T).transpose(0, 2, 1)
-        dy = (anchors[:, :, 1:2] - placed @ _QUARTER_Y.T).transpose(0, 2, 1)
-        b, k = dx.shape[0], dx.shape[2]
-        # Fitted one quarter turn per row, as below: a set's costs are then the same to the
-        # last bit whether its four quarter turns are costed at once or one by one.
-        w = np.repeat(anchors[:, None, :, 4], 4, axis=0)
-        costs: FloatArray = _robust_fit(dx.reshape(-1, 1, k), dy.reshape(-1, 1, k), w)
-        return costs.reshape(b, 4)
-    # (B, 1, k): the quarter-turn matrices hold only 0 and 1 in magnitude, so the turned
-    # sources are exactly those of the four at once.
+        # Each quarter turn as a set of its own, as when one is asked for: a set's costs
+        # are then the same to the last bit whether its four are costed at once or not.
+        every = np.tile(np.arange(4), len(anchors))
+        return position_costs_batch(np.repeat(anchors, 4, axis=0), every).reshape(-1, 4)
+    # (B, 1, k): prior less placed source under the set's quarter turn of the frame (the
+    # quarter-turn matrices hold only 0 and 1 in magnitude: the turned sources are exact).
+    placed = anchors[:, :, 2:4]
     turned_x = (placed * _QUARTER_X[quarters][:, None, :]).sum(axis=2)
     turned_y = (placed * _QUARTER_Y[quarters][:, None, :]).sum(axis=2)
     dx, dy = (anchors[:, :, 0] - turned_x)[:, None], (anchors[:, :, 1] - turned_y)[:, None]

@@ -1046,8 +1046,9 @@ def _least_position_costs(
     first = np.argmin(rotation + below, axis=1)
     out[rows, first] = position_costs_batch(anchors, first)
     best = rotation[rows, first] + out[rows, first]
-    again, quarter = np.nonzero(rotation + below < best[:, None])
-    again, quarter = again[quarter != first[again]], quarter[quarter != first[again]]
+    may_be_least = rotation + below < best[:, None]
+    may_be_least[rows, first] = False  # fitted already
+    again, quarter = np.nonzero(may_be_least)
     if len(again):
         out[again, quarter] = position_costs_batch(anchors[again], quarter)
     return out
