@@ -250,31 +250,31 @@ def position_costs_batch(
         # are then the same to the last bit whether its four are costed at once or not.
         every = np.tile(np.arange(4), len(anchors))
         return position_costs_batch(np.repeat(anchors, 4, axis=0), every).reshape(-1, 4)
-    # (B, 1, k): prior less placed source under the set's quarter turn of the frame (the
-    # quarter-turn matrices hold only 0 and 1 in magnitude: the turned sources are exact).
-    placed = anchors[:, :, 2:4]
-    turned_x = (placed * _QUARTER_X[quarters][:, None, :]).sum(axis=2)
-    turned_y = (placed * _QUARTER_Y[quarters][:, None, :]).sum(axis=2)
-    dx, dy = (anchors[:, :, 0] - turned_x)[:, None], (anchors[:, :, 1] - turned_y)[:, None]
-    single: FloatArray = _robust_fit(dx, dy, anchors[:, None, :, 4])[:, 0]
-    return single
+    # Prior less placed source under the set's quarter turn of the frame, (B, k) per axis
+    # (the quarter-turn matrices hold only 0 and 1 in magnitude: the turned sources are exact).
+    qx, qy = _QUARTER_X[quarters], _QUARTER_Y[quarters]
+    px, py = anchors[:, :, 2], anchors[:, :, 3]
+    dx = anchors[:, :, 0] - (px * qx[:, :1] + py * qx[:, 1:])
+    dy = anchors[:, :, 1] - (px * qy[:, :1] + py * qy[:, 1:])
+    return _robust_fit(dx, dy, anchors[:, :, 4])
 
 
 def _robust_fit(dx: FloatArray, dy: FloatArray, w: FloatArray) -> FloatArray:
-    """Robust cost (B, Q) of the misfits dx, dy (B, Q, k) of k anchors weighing w (B, 1, k)
-    once the best shift between the frames is taken out (reweighted least squares)."""
-    # Small arrays: fewer, simpler operations are what costs time here.
-    stacked = np.stack([dx, dy, np.ones(dx.shape)], axis=-1)  # (B, Q, k, 3)
-    squared = dx * dx + dy * dy
-    c = np.ones(dx.shape)
-    misfit = c
+    """Robust cost (B,) of the misfits dx, dy (B, k) of k anchors weighing w (B, k) once the
+    best shift between the frames is taken out (reweighted least squares)."""
+    # Small arrays: the number of numpy operations is what costs time here, not their size.
+    stacked = np.stack([dx, dy, np.ones(dx.shape)], axis=-1)  # (B, k, 3)
+    half = 0.5 / _ROBUST_SCALE
+    weights = w
+    misfit = w
     for _ in range(_REWEIGHTS):
-        # Weighted sums of dx, dy and the weights in one product: the fitted shift (mx, my).
-        sums = (c * w)[:, :, None, :] @ stacked  # (B, Q, 1, 3)
-        mx, my = sums[..., 0] / sums[..., 2], sums[..., 1] / sums[..., 2]
-        misfit = w * (squared - 2.0 * (dx * mx + dy * my) + mx * mx + my * my)
-        c = _cauchy_weights(misfit)
-    costs: FloatArray = (_ROBUST_SCALE * np.log1p((0.5 / _ROBUST_SCALE) * misfit)).sum(axis=2)
+        # Weighted sums of dx, dy and the weights in one product: the fitted shift.
+        sums = weights[:, None, :] @ stacked  # (B, 1, 3)
+        shift = sums[:, :, :2] / sums[:, :, 2:]
+        ex, ey = dx - shift[:, :, 0], dy - shift[:, :, 1]
+        misfit = (ex * ex + ey * ey) * w
+        weights = w / (misfit * half + 1.0)  # w times the Cauchy weight (_cauchy_weights)
+    costs: FloatArray = (_ROBUST_SCALE * np.log1p(half * misfit)).sum(axis=1)
     return costs
 
 

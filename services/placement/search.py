@@ -159,6 +159,7 @@ class _Search:
     prior_source: FloatArray = field(init=False)
     prior_variance: FloatArray = field(init=False)
     has_prior: np.ndarray = field(init=False)
+    free_boxes: FloatArray = field(init=False)  # [j, r]: (4,) piece j's free space's box
     top: list[tuple[float, int, PlacementCandidate]] = field(default_factory=list)
     breadth: int | None = None
     lowest: float = np.inf  # energy of the best leaf so far
@@ -208,6 +209,9 @@ class _Search:
         self.chain_ends = np.array(
             [[p.rotated[r][0][-1] for r in range(4)] for p in self.pieces]
         ).reshape(-1, 4, 2)
+        self.free_boxes = np.array(
+            [[p.rotated_free[r].box for r in range(4)] for p in self.pieces]
+        ).reshape(-1, 4, 4)
 
     @cached_property
     def index(self) -> dict[str, int]:
@@ -352,7 +356,7 @@ def _anchor_rows(
 class _State:
     order: tuple[int, ...]
     rotations: tuple[int, ...]
-    sources: tuple[FloatArray, ...]  # site position of each placed piece's source
+    sources: FloatArray  # (m, 2) site position of each placed piece's source
     end: FloatArray
     heading: int
     turning: int
@@ -366,6 +370,7 @@ class _State:
     # piece's source, mean and variance, (m, 2) each.
     drift_means: FloatArray
     drift_vars: FloatArray
+    owners: NDArray[np.intp]  # (S,) each sample's piece's place in the order (priors only)
     box: Box  # their bounds (x_lo, y_lo, x_hi, y_hi)
     violated: tuple[int, ...] = ()  # indices of broken hint pairs
     resolved: frozenset[int] = frozenset()  # hint pairs already decided
@@ -431,8 +436,7 @@ def _conflict(
     rooms, refitted weights or not (README, *Accuracy and speed*).
     """
     hits = 0
-    count = len(state.order)
-    shifts, margins = np.zeros((count, 2)), np.zeros(count)  # without priors: none
+    shifts, margins = np.zeros((len(state.order), 2)), np.zeros(len(state.order))
     if search.frame is not None:
         # Each placed piece relative to j: moved by the mean drift between them, and its
         # walls or free space counted only beyond a margin of that drift's spread.
@@ -440,22 +444,22 @@ def _conflict(
         shifts = state.drift_means - mean_j
         spread = np.sqrt(np.maximum(var_j - state.drift_vars, 0.0).max(axis=1))
         margins = search.params.conflict_drift_sigmas * spread
-    placed = zip(state.order, state.rotations, state.sources, shifts, margins.tolist(), strict=True)
-    for index, turn, source, shift, margin in placed:
-        free = search.pieces[index].rotated_free[turn]
-        at = source + shift
-        if _meets(box, free.box, at):
-            hits += free.hits(samples - at, margin)
+    # j's walls in the placed pieces' free spaces: only those whose box meets j's walls'
+    # (the test of _meets, all pieces at once).
+    at = state.sources + shifts
+    free_boxes = search.free_boxes[state.order, state.rotations]
+    x0, y0, x1, y1 = box
+    meets = (x0 <= free_boxes[:, 2] + at[:, 0]) & (x1 >= free_boxes[:, 0] + at[:, 0])
+    meets &= (y0 <= free_boxes[:, 3] + at[:, 1]) & (y1 >= free_boxes[:, 1] + at[:, 1])
+    for k in np.flatnonzero(meets).tolist():
+        free = search.pieces[state.order[k]].rotated_free[state.rotations[k]]
+        hits += free.hits(samples - at[k], float(margins[k]))
     free = search.pieces[j].rotated_free[rotation]
     placed_samples = state.samples
     placed_margins: FloatArray | float = 0.0  # a float: the plain free-cell test
     if search.frame is not None:
-        sizes = [
-            len(search.pieces[i].rotated[r][2])
-            for i, r in zip(state.order, state.rotations, strict=True)
-        ]
-        owners = np.repeat(np.arange(count), sizes)  # each sample's place in the order
-        placed_samples, placed_margins = state.samples + shifts[owners], margins[owners]
+        placed_samples = state.samples + shifts[state.owners]
+        placed_margins = margins[state.owners]
     pad = float(np.abs(shifts).max())  # how far a placed sample moves at most
     x0, y0, x1, y1 = state.box
     if _meets((x0 - pad, y0 - pad, x1 + pad, y1 + pad), free.box, state.end):
@@ -540,14 +544,15 @@ def _extend(
         position = position_costs(anchors)
     if search.frame is not None:
         features[_F["prior"]] = float((rotations_cost + position).min())
-    drift_means, drift_vars = state.drift_means, state.drift_vars
+    drift_means, drift_vars, owners = state.drift_means, state.drift_vars, state.owners
     if search.frame is not None:  # only the priors' conflict test reads them
         drift_means = np.vstack([drift_means, drift_mean])
         drift_vars = np.vstack([drift_vars, drift_var])
+        owners = np.concatenate([owners, np.full(len(samples), len(state.order))])
     child = _State(
         order=(*state.order, j),
         rotations=(*state.rotations, rotation),
-        sources=(*state.sources, state.end.copy()),
+        sources=np.vstack([state.sources, state.end]),
         end=pts[-1],
         heading=(piece.directions[-1] + rotation) % 4,
         turning=state.turning + turn + piece.turning,
@@ -559,6 +564,7 @@ def _extend(
         samples=np.concatenate([state.samples, samples]),
         drift_means=drift_means,
         drift_vars=drift_vars,
+        owners=owners,
         box=_union(state.box, box),
         violated=state.violated,
         resolved=state.resolved,
@@ -1065,7 +1071,7 @@ def _root(search: _Search) -> _State:
     return _State(
         order=(0,),
         rotations=(0,),
-        sources=(np.zeros(2),),
+        sources=np.zeros((1, 2)),
         end=pts[-1].copy(),
         heading=first.directions[-1],
         turning=first.turning,
@@ -1077,6 +1083,7 @@ def _root(search: _Search) -> _State:
         samples=samples,
         drift_means=np.zeros((1, 2)),
         drift_vars=np.zeros((1, 2)),
+        owners=np.zeros(len(samples), dtype=np.intp),
         box=first.sample_boxes[0],
         rotation_prior=rotation_prior,
         anchors=tuple(
