@@ -220,6 +220,14 @@ class PlacementParams(_Frozen):
     max_open_nodes: int = Field(
         2_000, ge=1, description="search nodes of the fallback search for an open chain"
     )
+    polish_nodes: int = Field(
+        5_000,
+        ge=0,
+        description="search nodes (pieces placed) spent, when the search ran out of its "
+        "budget, on loops one move away from the best found: a piece moved elsewhere in the "
+        "loop at any quarter turn, with the piece it then precedes at any quarter turn (0: "
+        "none)",
+    )
     unexplored_energy: float = Field(
         4.818,
         description="energy above the best of the 'none of these' alternative (local layouts "

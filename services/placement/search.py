@@ -80,6 +80,9 @@ _DFS_GROUP = 8  # children the depth-first search places at once (see _dfs)
 _LOOKAHEAD = 2  # pieces left after a child when its bound tries every way to finish (<= 2)
 _TOUR_PIECES = 16  # up to this many pieces the bounds hold the cheapest tour (2^15 x 16 x 4 table)
 _F = {name: k for k, name in enumerate(FEATURES)}
+# A junction's turn from the quarter turns between the headings it joins (mod 4); 2 folds
+# back, which no loop has.
+_TURN_OF = np.array([0, 1, 2, -1])
 
 
 @dataclass(frozen=True)
@@ -580,12 +583,20 @@ def _extend(
 
 def _close(search: _Search, state: _State) -> None:
     """Score the state as a leaf: a closed loop (all pieces), or a partial open chain."""
+    leaf = _leaf(search, state, search.threshold())
+    if leaf is not None:
+        search.record(leaf)
+
+
+def _leaf(search: _Search, state: _State, cap: float = np.inf) -> PlacementCandidate | None:
+    """The state as a leaf, or None when it is not one (an open chain in a closed search)
+    or its energy reaches ``cap`` (known before its hull is computed)."""
     first = search.pieces[0]
     turn = {0: 0, 1: 1, 3: -1}.get((first.directions[0] - state.heading) % 4, 2)
     closed_ok = turn != 2 and state.turning + turn == 4
     missing = len(search.pieces) - len(state.order)
     if search.require_closed and not closed_ok:
-        return
+        return None
     features = state.features.copy()
     violated = state.violated
     if not missing and closed_ok:
@@ -600,14 +611,14 @@ def _close(search: _Search, state: _State) -> None:
     penalty = _UNPLACED_PENALTY * missing + search.params.hint_pair_cost * len(violated)
     weights = search.weights
     # The hull has at least 4 edges: skip computing it when even that cannot win.
-    if weights @ features + weights[_F["hull"]] * 4 + penalty >= search.threshold():
-        return
+    if weights @ features + weights[_F["hull"]] * 4 + penalty >= cap:
+        return None
     features[_F["hull"]] = hull_edges(state.vertices)
     energy = float(weights @ features) + penalty
     ids = tuple(search.pieces[i].id for i in state.order)
     pairs = tuple(search.hints.pairs[k] for k in violated) if search.hints.pairs else ()
     named = dict(zip(FEATURES, features.tolist(), strict=True))
-    search.record(PlacementCandidate(energy, ids, state.rotations, named, missing, pairs))
+    return PlacementCandidate(energy, ids, state.rotations, named, missing, pairs)
 
 
 def _dfs(
@@ -1139,15 +1150,22 @@ def place_pieces(
             _dfs(search, root, tuple(range(1, n)))
             if search.truncated:
                 break
-        nodes += search.nodes
         if search.top:
             break
+        nodes += search.nodes
     assert search is not None
     if not search.top:
         return None
     found = [c for _, _, c in search.top]
     if search.require_closed:
         found = [_with_outside(search, c) for c in found]
+        if search.truncated:
+            # An exhaustive search's best is optimal; one cut short may have passed loops a
+            # move away from it that are better still.
+            polished = _polish(search, min(found, key=lambda c: c.energy))
+            known = {(c.order, c.rotations) for c in polished}
+            found = polished + [c for c in found if (c.order, c.rotations) not in known]
+    nodes += search.nodes
     ranked = sorted(found, key=lambda c: c.energy)
     return Placement(
         best=ranked[0],
@@ -1158,6 +1176,149 @@ def place_pieces(
         closed=search.require_closed,
         measured=search.measured,
     )
+
+
+def _polish(search: _Search, start: PlacementCandidate) -> list[PlacementCandidate]:
+    """Local search from ``start`` (a closed loop with its ``outside`` counted): the best
+    loop one move away (:func:`_moves`) while it is better, within the search's polish
+    budget of pieces placed. Returns the better loops found (``outside`` counted); every
+    loop placed is also recorded like a leaf of the search.
+
+    Moves are tried in order of a lower bound of their energy (:func:`_loop_bounds`): one
+    that cannot beat the best so far is never placed, and most cannot."""
+    index = search.index
+    order = np.array([index[fid] for fid in start.order], dtype=np.intp)
+    rotations = np.array(start.rotations, dtype=np.intp)
+    budget = search.nodes + search.params.polish_nodes
+    best, better = start, []
+    while search.nodes < budget:
+        orders, turned = _moves(order, rotations)
+        bounds = _loop_bounds(search, orders, turned)
+        prefix = [_root(search)]  # the current loop's states, one per piece placed
+        for j, rotation in zip(order[1:].tolist(), rotations[1:].tolist(), strict=True):
+            state = _extend_to(search, prefix[-1], j, rotation)
+            assert state is not None  # a loop found before: its walls do not cross
+            prefix.append(state)
+        moved = None
+        for c in np.argsort(bounds, kind="stable").tolist():
+            if bounds[c] >= best.energy or search.nodes >= budget:
+                break
+            first = int(np.flatnonzero((orders[c] != order) | (turned[c] != rotations))[0])
+            placed, leaf = prefix[first - 1], None
+            rest = zip(orders[c, first:].tolist(), turned[c, first:].tolist(), strict=True)
+            for j, rotation in rest:
+                extended = _extend_to(search, placed, j, rotation)
+                if extended is None:
+                    break  # walls cross
+                placed = extended
+            else:
+                leaf = _leaf(search, placed)
+            if leaf is None:
+                continue
+            search.record(leaf)
+            leaf = _with_outside(search, leaf)
+            if leaf.energy < best.energy:
+                best, moved = leaf, c
+        if moved is None:
+            break
+        better.append(best)
+        order, rotations = orders[moved], turned[moved]
+    return better
+
+
+def _extend_to(search: _Search, state: _State, j: int, rotation: int) -> _State | None:
+    """:func:`_extend` with piece j at a given quarter turn (counted as a search node)."""
+    search.nodes += 1
+    piece = search.pieces[j]
+    turn = int(_TURN_OF[(rotation + piece.directions[0] - state.heading) % 4])
+    return _extend(search, state, j, turn)
+
+
+def _moves(
+    order: NDArray[np.intp], rotations: NDArray[np.intp]
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Every loop one move away from (order, rotations) (piece indices and quarter turns,
+    loop order): a piece other than the first moved to any other place in the loop (or
+    left where it is) at any quarter turn, the piece after it there at any quarter turn
+    too. Returns (C, n) orders and rotations, each loop once, sorted, the given one left
+    out; many are no loop at all (:func:`_loop_bounds` tells)."""
+    n = len(order)
+    axes = np.meshgrid(np.arange(1, n), np.arange(1, n), np.arange(4), np.arange(4), indexing="ij")
+    moved, place, turn, next_turn = (a.ravel() for a in axes)
+    k = np.arange(n)[None, :]
+    # Position k of the new loop takes the old loop's piece: the moved one at its place,
+    # the others in their order around it.
+    rest = np.where(k < place[:, None], k, k - 1)
+    source = np.where(rest < moved[:, None], rest, rest + 1)
+    source = np.where(k == place[:, None], moved[:, None], source)
+    new_order, new_rotations = order[source], rotations[source]
+    rows = np.arange(len(moved))
+    new_rotations[rows, place] = turn
+    followed = place + 1 < n  # the first piece, after the last place, keeps its turn
+    new_rotations[rows[followed], place[followed] + 1] = next_turn[followed]
+    keep = followed | (next_turn == 0)
+    loops = np.unique(np.concatenate([new_order, new_rotations], axis=1)[keep], axis=0)
+    loops = loops[(loops != np.concatenate([order, rotations])).any(axis=1)]
+    return loops[:, :n], loops[:, n:]
+
+
+def _loop_bounds(
+    search: _Search, orders: NDArray[np.intp], rotations: NDArray[np.intp]
+) -> FloatArray:
+    """(C,) a lower bound of each loop's energy (pieces and quarter turns (C, n), loop
+    order), inf where they make no closed loop (a junction folds back, or the turns do not
+    add up to one full turn): its turns, junctions, closure and priors as :func:`_extend`
+    and :func:`_close` add them up, and the least hull. Walls crossing, free space and hint
+    pairs are left out: each adds nothing or more."""
+    heading_in = (search.first_direction[orders] + rotations) % 4  # of each piece's first wall
+    heading_out = (search.last_direction[orders] + rotations) % 4  # and of its last
+    before = heading_out  # junction k joins piece k to piece k + 1 (the last to the first)
+    after = np.roll(heading_in, -1, axis=1)
+    turns = _TURN_OF[(after - before) % 4]
+    closed = (np.abs(turns) < 2).all(axis=1)
+    closed &= turns.sum(axis=1) + search.turning[orders].sum(axis=1) == 4
+    step = search.step[before, after]  # (C, n, 2 (mean, variance), 2)
+    mean, var = step[:, :, 0].sum(axis=1), step[:, :, 1].sum(axis=1)
+    end = search.chain_ends[orders, rotations].sum(axis=1)
+    closure = 0.5 * (np.square(end + mean) / var + np.log(var)).sum(axis=1)
+    junctions = search.junction[orders, np.roll(orders, -1, axis=1)].sum(axis=1)
+    weights = search.weights
+    bound = weights[_F["turns"]] * (turns != 0).sum(axis=1) + junctions
+    bound += weights[_F["closure"]] * closure + weights[_F["hull"]] * 4
+    out: FloatArray = np.where(closed, bound, np.inf)
+    if search.frame is not None and closed.any():
+        out[closed] += weights[_F["prior"]] * _loop_priors(
+            search, orders[closed], rotations[closed], step[closed]
+        )
+    return out
+
+
+def _loop_priors(
+    search: _Search, orders: NDArray[np.intp], rotations: NDArray[np.intp], step: FloatArray
+) -> FloatArray:
+    """(C,) the prior feature of each loop (C, n), as :func:`_extend` adds it up: rotation
+    costs plus position costs (:func:`_anchor_rows`), the least over the frame's quarter
+    turns; step (C, n, 2, 2): each junction's displacement, mean and variance per axis."""
+    rotation = search.turned_rotation_cost[orders, rotations].sum(axis=1)  # (C, 4)
+    with_prior = search.has_prior[orders]  # the same count in every loop: all pieces
+    if with_prior.sum(axis=1).max(initial=0) < 2:
+        return np.asarray(rotation.min(axis=1), dtype=np.float64)
+    # Each piece's source where the loop puts it end to end, and the hidden displacement
+    # of the junctions before it.
+    sources = np.cumsum(search.chain_ends[orders, rotations], axis=1)
+    sources = np.concatenate([np.zeros_like(sources[:, :1]), sources[:, :-1]], axis=1)
+    drift = np.cumsum(step, axis=1)
+    drift = np.concatenate([np.zeros_like(drift[:, :1]), drift[:, :-1]], axis=1)
+    rows, places = np.nonzero(with_prior)
+    anchors = _anchor_rows(
+        search,
+        orders[rows, places],
+        sources[rows, places],
+        drift[rows, places, 0],
+        drift[rows, places, 1],
+    ).reshape(len(orders), -1, 5)
+    least: FloatArray = (rotation + position_costs_batch(anchors)).min(axis=1)
+    return least
 
 
 def _with_outside(search: _Search, cand: PlacementCandidate) -> PlacementCandidate:

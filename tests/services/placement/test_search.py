@@ -366,6 +366,143 @@ def test_a_childs_bound_is_never_above_a_leaf_below_it(monkeypatch, seed):
     assert tighter > 0
 
 
+# ---------------------------------------------------------------------------------------------
+# Polishing a search cut short
+# ---------------------------------------------------------------------------------------------
+
+
+def _every_loop(n):
+    """Every order and quarter turn of pieces 1..n-1 after piece 0 at rotation 0, as arrays."""
+    loops = [
+        ((0, *perm), (0, *rots))
+        for perm in itertools.permutations(range(1, n))
+        for rots in itertools.product(range(4), repeat=n - 1)
+    ]
+    orders, rotations = zip(*loops, strict=True)
+    return np.array(orders), np.array(rotations)
+
+
+def _placed_leaf(search, order, rotations):
+    """The leaf of one loop (None where its walls cross or it does not close)."""
+    state = search_module._root(search)
+    for j, rotation in zip(order[1:].tolist(), rotations[1:].tolist(), strict=True):
+        piece = search.pieces[j]
+        turn = int(search_module._TURN_OF[(rotation + piece.directions[0] - state.heading) % 4])
+        if abs(turn) > 1:
+            return None
+        extended = search_module._extend(search, state, j, turn)
+        if extended is None:
+            return None
+        state = extended
+    return search_module._leaf(search, state)
+
+
+@pytest.mark.parametrize(("seed", "with_priors"), [(0, False), (1, False), (2, True)])
+def test_a_loops_bound_is_its_energy_without_hull_or_free_space(seed, with_priors):
+    # Turns, junctions, closure and priors are all a loop's energy holds here: the bound is
+    # that energy exactly, for every order and turn; inf exactly where no closed loop is.
+    rng = np.random.default_rng(seed)
+    rect = np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 4.0], [0.0, 4.0]])
+    cuts, turns = [0.5, 3.0, 7.0, 11.0, 15.5], rng.integers(0, 4, 5).tolist()
+    pieces = chains_from_polygon(rect, cuts, turns)
+    hints = _truth_priors(rect, cuts, turns, rng, (0.8, 0.2)) if with_priors else SiteHints()
+    params = GEOMETRY.model_copy(update={"weight_hull": 0.0, "use_structure": True})
+    search = search_module._Search(pieces, params, hints, True)
+    search = _with_structure(search, rng.uniform(-1.0, 0.0, (5, 5)))
+    orders, rotations = _every_loop(5)
+    bounds = search_module._loop_bounds(search, orders, rotations)
+    placed, priced = 0, 0.0
+    for order, turns, bound in zip(orders, rotations, bounds.tolist(), strict=True):
+        leaf = _placed_leaf(search, order, turns)
+        if leaf is None:
+            continue  # walls cross (the bound does not look at walls) or no loop
+        placed += 1
+        assert bound == pytest.approx(leaf.energy, abs=1e-9)
+        priced = max(priced, leaf.features["prior"])
+    assert placed > 10
+    assert (priced > 1.0) == with_priors  # the priors' costs are in it
+    assert np.isfinite(bounds).sum() >= placed
+
+
+def test_a_loops_bound_is_below_its_energy(l_room):
+    # With the hull, free space and priors, which the bound leaves out (each adds nothing
+    # or more), over every loop one move away from the best.
+    pieces, hints = _cut_with_priors(l_room, 5, 7, noise=(0.5, 0.1))
+    params = UNTUNED.model_copy(update={"use_structure": False, "use_boundary": False})
+    placement = place_pieces(pieces, params, hints)
+    assert placement is not None and placement.closed
+    search = search_module._Search(pieces, params, hints, True)
+    best = placement.best
+    orders, rotations = search_module._moves(
+        np.array([search.index[fid] for fid in best.order]), np.array(best.rotations)
+    )
+    bounds = search_module._loop_bounds(search, orders, rotations)
+    checked = 0
+    for order, turns, bound in zip(orders, rotations, bounds.tolist(), strict=True):
+        leaf = _placed_leaf(search, order, turns)
+        if leaf is not None:
+            assert bound <= leaf.energy + 1e-9
+            checked += leaf.energy > bound + 1e-6
+    assert checked > 0  # the terms left out count somewhere
+
+
+def test_moves_are_every_loop_one_move_away():
+    order, rotations = np.array([0, 3, 1, 4, 2]), np.array([0, 2, 1, 0, 3])
+    orders, turned = search_module._moves(order, rotations)
+    loops = {(tuple(o), tuple(r)) for o, r in zip(orders.tolist(), turned.tolist(), strict=True)}
+    assert len(loops) == len(orders)
+    expected = set()
+    for moved, place, turn, next_turn in itertools.product(
+        range(1, 5), range(1, 5), range(4), range(4)
+    ):
+        pairs = zip(order.tolist(), rotations.tolist(), strict=True)
+        rest = [pair for k, pair in enumerate(pairs) if k != moved]
+        loop = [*rest[:place], (int(order[moved]), turn), *rest[place:]]
+        if place + 1 < 5:
+            loop[place + 1] = (loop[place + 1][0], next_turn)
+        new = tuple(o for o, _ in loop), tuple(r for _, r in loop)
+        if new != (tuple(order.tolist()), tuple(rotations.tolist())):
+            expected.add(new)
+    assert loops == expected
+    assert ((0, 3, 4, 1, 2), (0, 2, 0, 1, 3)) in loops  # two neighbours swapped
+    assert ((0, 3, 1, 4, 2), (0, 2, 1, 3, 3)) in loops  # one piece turned
+
+
+def test_polish_reaches_the_best_loop_from_one_move_away():
+    # The exhaustive search's best, moved away from by one move to a worse loop: polishing
+    # that loop finds the best again.
+    pieces = _comb_pieces(6)
+    best = place_pieces(pieces, GEOMETRY)
+    assert best is not None and best.exhaustive
+    search = search_module._Search(list(pieces), GEOMETRY, SiteHints(), True)
+    index = search.index
+    order = np.array([index[fid] for fid in best.best.order])
+    rotations = np.array(best.best.rotations)
+    orders, turned = search_module._moves(order, rotations)
+    worse = []
+    for o, r in zip(orders, turned, strict=True):
+        leaf = _placed_leaf(search, o, r)
+        if leaf is not None:
+            worse.append(search_module._with_outside(search, leaf))
+    assert worse
+    start = max(worse, key=lambda c: c.energy)  # the worst loop one move away
+    found = search_module._polish(search, start)
+    assert found and _key(found[-1]) == _key(best.best)
+    assert found[-1].energy == pytest.approx(best.best.energy, abs=1e-9)
+    assert all(a.energy > b.energy for a, b in itertools.pairwise([start, *found]))
+    assert 0 < search.nodes <= GEOMETRY.polish_nodes
+
+
+def test_polish_keeps_to_its_budget():
+    pieces = _comb_pieces(8)
+    for budget in (0, 30):
+        params = GEOMETRY.model_copy(update={"max_search_nodes": 200, "polish_nodes": budget})
+        placement = place_pieces(pieces, params)
+        assert placement is not None and placement.closed and not placement.exhaustive
+        # The closed search stops at its budget (one node over at most), the polish at its.
+        assert placement.nodes_searched <= 200 + 1 + budget + len(pieces)
+
+
 def _truth_priors(polygon, cuts, turns, rng=None, noise=(0.0, 0.0), frame=(0.5, (3.0, -1.0))):
     """Prior per piece from the truth: the piece made with ``turns[k]`` quarter turns sits
     turned back by them; the hints frame is the polygon's turned by frame[0], shifted."""
@@ -516,7 +653,9 @@ def test_node_budget_is_respected(budget):
     limited = place_pieces(pieces, GEOMETRY.model_copy(update={"max_search_nodes": budget}))
     assert limited is not None
     # The closed search keeps to its budget; the open fallback has a budget of its own.
-    assert limited.nodes_searched <= budget + 1 + GEOMETRY.max_open_nodes + 1
+    assert (
+        limited.nodes_searched <= budget + 1 + GEOMETRY.max_open_nodes + 1 + GEOMETRY.polish_nodes
+    )
     assert not limited.exhaustive
 
 
@@ -527,7 +666,7 @@ def test_a_wide_beam_leaves_the_budget_room_to_close_the_loop():
     params = GEOMETRY.model_copy(update={"beam_width": 1000, "max_search_nodes": 4000})
     placement = place_pieces(pieces, params)
     assert placement is not None and placement.closed
-    assert placement.nodes_searched <= 4000 + 1
+    assert placement.nodes_searched <= 4000 + 1 + params.polish_nodes
 
 
 def test_a_small_site_is_searched_in_fewer_nodes():
