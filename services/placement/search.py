@@ -592,7 +592,7 @@ def _leaf(search: _Search, state: _State, cap: float = np.inf) -> PlacementCandi
     """The state as a leaf, or None when it is not one (an open chain in a closed search)
     or its energy reaches ``cap`` (known before its hull is computed)."""
     first = search.pieces[0]
-    turn = {0: 0, 1: 1, 3: -1}.get((first.directions[0] - state.heading) % 4, 2)
+    turn = int(_TURN_OF[(first.directions[0] - state.heading) % 4])
     closed_ok = turn != 2 and state.turning + turn == 4
     missing = len(search.pieces) - len(state.order)
     if search.require_closed and not closed_ok:
@@ -1227,11 +1227,11 @@ def _polish(search: _Search, start: PlacementCandidate) -> list[PlacementCandida
 
 
 def _extend_to(search: _Search, state: _State, j: int, rotation: int) -> _State | None:
-    """:func:`_extend` with piece j at a given quarter turn (counted as a search node)."""
+    """:func:`_extend` with piece j at a given quarter turn (counted as a search node), or
+    None where its junction would fold back."""
     search.nodes += 1
-    piece = search.pieces[j]
-    turn = int(_TURN_OF[(rotation + piece.directions[0] - state.heading) % 4])
-    return _extend(search, state, j, turn)
+    turn = int(_TURN_OF[(rotation + search.pieces[j].directions[0] - state.heading) % 4])
+    return None if turn == 2 else _extend(search, state, j, turn)
 
 
 def _moves(
@@ -1389,9 +1389,7 @@ def evaluate_placement(
     search = _Search(list(pieces), one, hints or SiteHints(), True)
     state = _root(search)
     for fid, rotation in zip(order[1:], rotations[1:], strict=True):
-        j = by_id[fid]
-        turn = {0: 0, 1: 1, 3: -1}.get((rotation + pieces[j].directions[0] - state.heading) % 4)
-        child = None if turn is None else _extend(search, state, j, turn)
+        child = _extend_to(search, state, by_id[fid], rotation)
         if child is None:
             return None
         state = child

@@ -386,11 +386,7 @@ def _placed_leaf(search, order, rotations):
     """The leaf of one loop (None where its walls cross or it does not close)."""
     state = search_module._root(search)
     for j, rotation in zip(order[1:].tolist(), rotations[1:].tolist(), strict=True):
-        piece = search.pieces[j]
-        turn = int(search_module._TURN_OF[(rotation + piece.directions[0] - state.heading) % 4])
-        if abs(turn) > 1:
-            return None
-        extended = search_module._extend(search, state, j, turn)
+        extended = search_module._extend_to(search, state, j, rotation)
         if extended is None:
             return None
         state = extended
