@@ -228,6 +228,16 @@ class PlacementParams(_Frozen):
         "loop at any quarter turn, with the piece it then precedes at any quarter turn (0: "
         "none)",
     )
+    restart_roots: int = Field(
+        2,
+        ge=0,
+        description="when the search ran out of its budget without prior poses: other "
+        "searches entering the loop at as many other pieces (spread evenly), whose loops "
+        "compete with the first's (0: none)",
+    )
+    restart_nodes: int = Field(
+        5_000, ge=1, description="search nodes of each of those other searches"
+    )
     unexplored_energy: float = Field(
         4.818,
         description="energy above the best of the 'none of these' alternative (local layouts "

@@ -1132,30 +1132,16 @@ def place_pieces(
         # The open search (partial chains, when no closed loop was found) has a budget of
         # its own: what the closed one spent must not leave nothing to place.
         search = _Search(list(pieces), params, hints, require_closed)
-        root = _root(search)
-        if require_closed and params.beam_width > 0:
-            # A beam over the loop positions finds good loops of many pieces early and
-            # evenly; the depth-first passes then prune against them. It spends at most half
-            # the node budget, so that a site of many pieces still ends with closed loops,
-            # and narrows for small sites, whose depth-first search finishes anyway.
-            width = min(
-                params.beam_width // 3 ** max(0, params.large_site_pieces - n),
-                params.max_search_nodes // (2 * max(n - 1, 1)),
-            )
-            _beam(search, root, max(width, 1))
-        # Iterative broadening: cheap passes that follow only the most promising children
-        # spread good incumbents over the whole tree, so the full pass prunes early.
-        for breadth in (*_BROADENING, None):
-            search.breadth = breadth
-            _dfs(search, root, tuple(range(1, n)))
-            if search.truncated:
-                break
+        _explore(search)
         if search.top:
             break
         nodes += search.nodes
     assert search is not None
     if not search.top:
         return None
+    if search.require_closed and search.truncated and search.frame is None:
+        for j in _restart_roots(n, params.restart_roots):
+            nodes += _restart(search, j)
     found = [c for _, _, c in search.top]
     if search.require_closed:
         found = [_with_outside(search, c) for c in found]
@@ -1176,6 +1162,74 @@ def place_pieces(
         closed=search.require_closed,
         measured=search.measured,
     )
+
+
+def _explore(search: _Search) -> None:
+    """Search from the first piece within the node budget (see the module's docstring)."""
+    n, params = len(search.pieces), search.params
+    root = _root(search)
+    if search.require_closed and params.beam_width > 0:
+        # A beam over the loop positions finds good loops of many pieces early and evenly;
+        # the depth-first passes then prune against them. It spends at most half the node
+        # budget, so that a site of many pieces still ends with closed loops, and narrows
+        # for small sites, whose depth-first search finishes anyway.
+        width = min(
+            params.beam_width // 3 ** max(0, params.large_site_pieces - n),
+            params.max_search_nodes // (2 * max(n - 1, 1)),
+        )
+        _beam(search, root, max(width, 1))
+    # Iterative broadening: cheap passes that follow only the most promising children
+    # spread good incumbents over the whole tree, so the full pass prunes early.
+    for breadth in (*_BROADENING, None):
+        search.breadth = breadth
+        _dfs(search, root, tuple(range(1, n)))
+        if search.truncated:
+            break
+
+
+def _restart_roots(n: int, count: int) -> list[int]:
+    """The pieces (indices) other searches start from: ``count`` spread evenly over the
+    others."""
+    return sorted({round(k * n / (count + 1)) for k in range(1, count + 1)} - {0})
+
+
+def _restart(search: _Search, j: int) -> int:
+    """Search the loop again starting from piece j (rotation 0 there) within the restart
+    budget, and record what it found in ``search``, turned and shifted so that its first
+    piece leads at rotation 0. Returns the nodes the other search spent.
+
+    A search cut short keeps the partial loops its first junctions favour; where those
+    mislead, a search entering the loop elsewhere does not share the same prefixes. Each
+    loop is placed again in ``search`` (its nodes count there): pieces are laid end to end
+    from the first, so the loop's closing gap, where walls are tested for crossing and
+    pieces for conflicts, lies before another piece and the energy may differ (a loop
+    whose walls then cross is dropped)."""
+    pieces = [search.pieces[j], *(p for k, p in enumerate(search.pieces) if k != j)]
+    params = search.params.model_copy(update={"max_search_nodes": search.params.restart_nodes})
+    other = _Search(pieces, params, search.hints, True)
+    _explore(other)
+    index, first = search.index, search.pieces[0].id
+    for _, _, cand in sorted(other.top, key=lambda item: (-item[0], item[1])):
+        k = cand.order.index(first)
+        order = [index[fid] for fid in (*cand.order[k:], *cand.order[:k])]
+        turns = cand.rotations[k:] + cand.rotations[:k]
+        rotations = [(r - turns[0]) % 4 for r in turns]
+        state = _placed_loop(search, order, rotations)
+        if state is not None:
+            _close(search, state)
+    return other.nodes
+
+
+def _placed_loop(search: _Search, order: Sequence[int], rotations: Sequence[int]) -> _State | None:
+    """The state of the pieces ``order`` (indices, the first piece first) at quarter turns
+    ``rotations`` laid end to end, or None where a junction folds back or walls cross."""
+    state = _root(search)
+    for j, rotation in zip(order[1:], rotations[1:], strict=True):
+        extended = _extend_to(search, state, j, rotation)
+        if extended is None:
+            return None
+        state = extended
+    return state
 
 
 def _polish(search: _Search, start: PlacementCandidate) -> list[PlacementCandidate]:
@@ -1387,11 +1441,8 @@ def evaluate_placement(
         return None
     one = params.model_copy(update={"top_k": 1})
     search = _Search(list(pieces), one, hints or SiteHints(), True)
-    state = _root(search)
-    for fid, rotation in zip(order[1:], rotations[1:], strict=True):
-        child = _extend_to(search, state, by_id[fid], rotation)
-        if child is None:
-            return None
-        state = child
+    state = _placed_loop(search, [by_id[fid] for fid in order], rotations)
+    if state is None:
+        return None
     _close(search, state)
     return _with_outside(search, search.top[0][2]) if search.top else None

@@ -384,13 +384,8 @@ def _every_loop(n):
 
 def _placed_leaf(search, order, rotations):
     """The leaf of one loop (None where its walls cross or it does not close)."""
-    state = search_module._root(search)
-    for j, rotation in zip(order[1:].tolist(), rotations[1:].tolist(), strict=True):
-        extended = search_module._extend_to(search, state, j, rotation)
-        if extended is None:
-            return None
-        state = extended
-    return search_module._leaf(search, state)
+    state = search_module._placed_loop(search, order.tolist(), rotations.tolist())
+    return None if state is None else search_module._leaf(search, state)
 
 
 @pytest.mark.parametrize(("seed", "with_priors"), [(0, False), (1, False), (2, True)])
@@ -492,7 +487,9 @@ def test_polish_reaches_the_best_loop_from_one_move_away():
 def test_polish_keeps_to_its_budget():
     pieces = _comb_pieces(8)
     for budget in (0, 30):
-        params = GEOMETRY.model_copy(update={"max_search_nodes": 200, "polish_nodes": budget})
+        params = GEOMETRY.model_copy(
+            update={"max_search_nodes": 200, "polish_nodes": budget, "restart_roots": 0}
+        )
         placement = place_pieces(pieces, params)
         assert placement is not None and placement.closed and not placement.exhaustive
         # The closed search stops at its budget (one node over at most), the polish at its.
@@ -648,10 +645,10 @@ def test_node_budget_is_respected(budget):
     assert full is not None and full.exhaustive and full.nodes_searched > 200
     limited = place_pieces(pieces, GEOMETRY.model_copy(update={"max_search_nodes": budget}))
     assert limited is not None
-    # The closed search keeps to its budget; the open fallback has a budget of its own.
-    assert (
-        limited.nodes_searched <= budget + 1 + GEOMETRY.max_open_nodes + 1 + GEOMETRY.polish_nodes
-    )
+    # The closed search keeps to its budget; the open fallback, the restarts and the polish
+    # have budgets of their own.
+    most = budget + 1 + GEOMETRY.max_open_nodes + 1 + GEOMETRY.polish_nodes + _restarts_nodes(6)
+    assert limited.nodes_searched <= most
     assert not limited.exhaustive
 
 
@@ -662,7 +659,49 @@ def test_a_wide_beam_leaves_the_budget_room_to_close_the_loop():
     params = GEOMETRY.model_copy(update={"beam_width": 1000, "max_search_nodes": 4000})
     placement = place_pieces(pieces, params)
     assert placement is not None and placement.closed
-    assert placement.nodes_searched <= 4000 + 1 + params.polish_nodes
+    assert placement.nodes_searched <= 4000 + 1 + params.polish_nodes + _restarts_nodes(12)
+
+
+def _restarts_nodes(n, params=GEOMETRY):
+    """The most nodes the restarts of a site of n pieces spend: their budgets, one node over
+    each, and placing each loop they keep again."""
+    return params.restart_roots * (params.restart_nodes + 1 + params.top_k * (n - 1))
+
+
+@pytest.mark.parametrize(("n", "count", "roots"), [(12, 2, [4, 8]), (9, 3, [2, 4, 7]), (2, 2, [1])])
+def test_restarts_enter_the_loop_at_pieces_spread_evenly(n, count, roots):
+    assert search_module._restart_roots(n, count) == roots
+
+
+def test_a_restart_records_its_loops_led_by_the_first_piece():
+    # The search from piece 0 has no node to spend; the restart from piece 3 searches the
+    # whole tree: its best, shifted to start at piece 0, is the exhaustive search's best,
+    # scored alike.
+    pieces = _comb_pieces(6)
+    best = place_pieces(pieces, GEOMETRY)
+    assert best is not None and best.exhaustive
+    params = GEOMETRY.model_copy(update={"max_search_nodes": 1, "restart_nodes": 10**6})
+    search = search_module._Search(list(pieces), params, SiteHints(), True)
+    assert not search.top
+    spent = search_module._restart(search, 3)
+    assert spent > best.nodes_searched / 2
+    found = min((c for _, _, c in search.top), key=lambda c: c.energy)
+    found = search_module._with_outside(search, found)
+    assert _key(found) == _key(best.best)
+    assert found.energy == pytest.approx(best.best.energy, abs=1e-9)
+
+
+def test_restarts_keep_to_their_budget():
+    pieces = _comb_pieces(10)
+    params = GEOMETRY.model_copy(update={"max_search_nodes": 300, "restart_nodes": 200})
+    placement = place_pieces(pieces, params)
+    assert placement is not None and placement.closed and not placement.exhaustive
+    alone = place_pieces(pieces, params.model_copy(update={"restart_roots": 0}))
+    assert alone is not None
+    assert placement.nodes_searched > alone.nodes_searched
+    limit = 300 + 1 + params.polish_nodes + _restarts_nodes(10, params)
+    assert placement.nodes_searched <= limit
+    assert placement.best.energy <= alone.best.energy + 1e-9
 
 
 def test_a_small_site_is_searched_in_fewer_nodes():
