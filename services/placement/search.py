@@ -85,6 +85,9 @@ _F = {name: k for k, name in enumerate(FEATURES)}
 _TURN_OF = np.array([0, 1, 2, -1])
 
 
+_PairEvidence = tuple[FloatArray, FloatArray, dict[tuple[str, str], float]]
+
+
 @dataclass(frozen=True)
 class PlacementCandidate:
     """A complete placement, its energy and the features it is the weighted sum of.
@@ -137,6 +140,9 @@ class _Search:
     params: PlacementParams
     hints: SiteHints
     require_closed: bool
+    # Structure scores, boundary mismatches and measured overlaps of the ordered pairs (see
+    # _pair_evidence): given when another search of the same pieces has them already.
+    evidence: _PairEvidence | None = None
     weights: FloatArray = field(init=False)
     noise: JunctionNoise = field(init=False)
     structure: FloatArray = field(init=False)  # [a, b]: structure score of b after a
@@ -177,7 +183,9 @@ class _Search:
         self.finish_exactly = self.require_closed and n < self.params.large_site_pieces
         self.weights = feature_weights(self.params, self.pieces)
         self.noise = JunctionNoise.from_params(self.params)
-        self.structure, self.boundary, self.measured = _pair_evidence(self.pieces, self.params)
+        if self.evidence is None:
+            self.evidence = _pair_evidence(self.pieces, self.params)
+        self.structure, self.boundary, self.measured = self.evidence
         cost = self.weights[_F["structure"]] * self.structure
         cost = cost + self.weights[_F["boundary"]] * self.boundary
         if n > 1:
@@ -266,9 +274,7 @@ class _Search:
             heapq.heappop(self.top)
 
 
-def _pair_evidence(
-    pieces: Sequence[Piece], params: PlacementParams
-) -> tuple[FloatArray, FloatArray, dict[tuple[str, str], float]]:
+def _pair_evidence(pieces: Sequence[Piece], params: PlacementParams) -> _PairEvidence:
     """Structure scores and boundary mismatches of every ordered pair [a, b] (b after a),
     and the overlaps their ends' structure measures."""
     n = len(pieces)
@@ -1131,7 +1137,8 @@ def place_pieces(
     for require_closed in (True, False):
         # The open search (partial chains, when no closed loop was found) has a budget of
         # its own: what the closed one spent must not leave nothing to place.
-        search = _Search(list(pieces), params, hints, require_closed)
+        evidence = None if search is None else search.evidence
+        search = _Search(list(pieces), params, hints, require_closed, evidence)
         _explore(search)
         if search.top:
             break
@@ -1204,9 +1211,12 @@ def _restart(search: _Search, j: int) -> int:
     from the first, so the loop's closing gap, where walls are tested for crossing and
     pieces for conflicts, lies before another piece and the energy may differ (a loop
     whose walls then cross is dropped)."""
-    pieces = [search.pieces[j], *(p for k, p in enumerate(search.pieces) if k != j)]
+    led = [j, *(k for k in range(len(search.pieces)) if k != j)]  # piece j first
+    pieces = [search.pieces[k] for k in led]
     params = search.params.model_copy(update={"max_search_nodes": search.params.restart_nodes})
-    other = _Search(pieces, params, search.hints, True)
+    pairs = np.ix_(led, led)
+    evidence = (search.structure[pairs], search.boundary[pairs], search.measured)
+    other = _Search(pieces, params, search.hints, True, evidence)
     _explore(other)
     index, first = search.index, search.pieces[0].id
     for _, _, cand in sorted(other.top, key=lambda item: (-item[0], item[1])):
