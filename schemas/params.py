@@ -229,7 +229,7 @@ class PlacementParams(_Frozen):
         "none)",
     )
     restart_roots: int = Field(
-        2,
+        1,
         ge=0,
         description="when the search ran out of its budget without prior poses: other "
         "searches entering the loop at as many other pieces (spread evenly), whose loops "
