@@ -18,7 +18,9 @@ many states at once (a beam layer, or a few siblings placed together), since a n
 is mostly numpy's per-call overhead.
 
 The search keeps the ``top_k`` best assemblies, and its budget is a number of nodes, never a
-time: the same input gives the same answer on any machine.
+time: the same input gives the same answer on any machine. A search that runs out of nodes
+is searched again from another first piece (:func:`_restart`) and its best loop is polished
+(:func:`_polish`), each within a node budget of its own.
 """
 
 from __future__ import annotations
