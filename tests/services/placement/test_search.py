@@ -685,10 +685,38 @@ def test_a_restart_records_its_loops_led_by_the_first_piece():
     assert not search.top
     spent = search_module._restart(search, 3)
     assert spent > best.nodes_searched / 2
-    found = min((c for _, _, c in search.top), key=lambda c: c.energy)
-    found = search_module._with_outside(search, found)
+    found = min(
+        (search_module._with_outside(search, c) for _, _, c in search.top), key=lambda c: c.energy
+    )
     assert _key(found) == _key(best.best)
     assert found.energy == pytest.approx(best.best.energy, abs=1e-9)
+
+
+def test_a_restart_keeps_to_the_pair_hints():
+    # Pair hints name pieces, not places in the loop: a restart's loops, placed again from
+    # the first piece, are scored with the hints as the first search scores its own.
+    pieces = _comb_pieces(6)
+    free = place_pieces(pieces, GEOMETRY)
+    assert free is not None
+    wanted = free.best.order
+    hints = SiteHints(pairs=tuple(HintPair(a, b, True) for a, b in itertools.pairwise(wanted)))
+    wide = GEOMETRY.model_copy(update={"energy_window": 20.0})  # keep hint breakers too
+    full = place_pieces(pieces, wide, hints)
+    assert full is not None and full.exhaustive
+    params = wide.model_copy(update={"max_search_nodes": 1, "restart_nodes": 10**6})
+    search = search_module._Search(list(pieces), params, hints, True)
+    search_module._restart(search, 2)
+    found = [search_module._with_outside(search, c) for _, _, c in search.top]
+    best = min(found, key=lambda c: c.energy)
+    assert _key(best) == _key(full.best)
+    assert best.violated_pairs == full.best.violated_pairs
+    assert best.energy == pytest.approx(full.best.energy, abs=1e-9)
+    assert len(found) > 1
+    for cand in found:  # every loop scored as evaluate_placement scores it, hints and all
+        alone = evaluate_placement(pieces, cand.order, cand.rotations, wide, hints)
+        assert alone is not None
+        assert cand.violated_pairs == alone.violated_pairs
+        assert cand.energy == pytest.approx(alone.energy, abs=1e-9)
 
 
 def test_restarts_keep_to_their_budget():
