@@ -29,7 +29,7 @@ import heapq
 import itertools
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import InitVar, dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -144,7 +144,7 @@ class _Search:
     require_closed: bool
     # Structure scores, boundary mismatches and measured overlaps of the ordered pairs (see
     # _pair_evidence): given when another search of the same pieces has them already.
-    evidence: _PairEvidence | None = None
+    evidence: InitVar[_PairEvidence | None] = None
     weights: FloatArray = field(init=False)
     noise: JunctionNoise = field(init=False)
     structure: FloatArray = field(init=False)  # [a, b]: structure score of b after a
@@ -180,14 +180,14 @@ class _Search:
     nodes: int = 0
     counter: itertools.count[int] = field(default_factory=itertools.count)
 
-    def __post_init__(self) -> None:
+    def __post_init__(self, evidence: _PairEvidence | None) -> None:
         n = len(self.pieces)
         self.finish_exactly = self.require_closed and n < self.params.large_site_pieces
         self.weights = feature_weights(self.params, self.pieces)
         self.noise = JunctionNoise.from_params(self.params)
-        if self.evidence is None:
-            self.evidence = _pair_evidence(self.pieces, self.params)
-        self.structure, self.boundary, self.measured = self.evidence
+        if evidence is None:
+            evidence = _pair_evidence(self.pieces, self.params)
+        self.structure, self.boundary, self.measured = evidence
         cost = self.weights[_F["structure"]] * self.structure
         cost = cost + self.weights[_F["boundary"]] * self.boundary
         if n > 1:
@@ -225,6 +225,11 @@ class _Search:
         self.free_boxes = np.array(
             [[p.rotated_free[r].box for r in range(4)] for p in self.pieces]
         ).reshape(-1, 4, 4)
+
+    def pair_evidence(self, led: Sequence[int]) -> _PairEvidence:
+        """The pair evidence of the pieces ``led`` (indices), in that order."""
+        pairs = np.ix_(led, led)
+        return self.structure[pairs], self.boundary[pairs], self.measured
 
     @cached_property
     def index(self) -> dict[str, int]:
@@ -1139,7 +1144,7 @@ def place_pieces(
     for require_closed in (True, False):
         # The open search (partial chains, when no closed loop was found) has a budget of
         # its own: what the closed one spent must not leave nothing to place.
-        evidence = None if search is None else search.evidence
+        evidence = None if search is None else search.pair_evidence(range(n))
         search = _Search(list(pieces), params, hints, require_closed, evidence)
         _explore(search)
         if search.top:
@@ -1216,9 +1221,7 @@ def _restart(search: _Search, j: int) -> int:
     led = [j, *(k for k in range(len(search.pieces)) if k != j)]  # piece j first
     pieces = [search.pieces[k] for k in led]
     params = search.params.model_copy(update={"max_search_nodes": search.params.restart_nodes})
-    pairs = np.ix_(led, led)
-    evidence = (search.structure[pairs], search.boundary[pairs], search.measured)
-    other = _Search(pieces, params, search.hints, True, evidence)
+    other = _Search(pieces, params, search.hints, True, search.pair_evidence(led))
     _explore(other)
     index, first = search.index, search.pieces[0].id
     for _, _, cand in sorted(other.top, key=lambda item: (-item[0], item[1])):
@@ -1235,13 +1238,25 @@ def _restart(search: _Search, j: int) -> int:
 def _placed_loop(search: _Search, order: Sequence[int], rotations: Sequence[int]) -> _State | None:
     """The state of the pieces ``order`` (indices, the first piece first) at quarter turns
     ``rotations`` laid end to end, or None where a junction folds back or walls cross."""
-    state = _root(search)
-    for j, rotation in zip(order[1:], rotations[1:], strict=True):
+    root = _root(search)
+    laid = _laid_after(search, root, order[1:], rotations[1:])
+    return None if laid is None else (laid[-1] if laid else root)
+
+
+def _laid_after(
+    search: _Search, state: _State, order: Sequence[int], rotations: Sequence[int]
+) -> list[_State] | None:
+    """The states of the pieces ``order`` (indices) at quarter turns ``rotations`` laid end
+    to end after ``state``, one per piece (each a search node), or None where a junction
+    folds back or walls cross."""
+    laid = []
+    for j, rotation in zip(order, rotations, strict=True):
         extended = _extend_to(search, state, j, rotation)
         if extended is None:
             return None
+        laid.append(extended)
         state = extended
-    return state
+    return laid
 
 
 def _polish(search: _Search, start: PlacementCandidate) -> list[PlacementCandidate]:
@@ -1260,25 +1275,19 @@ def _polish(search: _Search, start: PlacementCandidate) -> list[PlacementCandida
     while search.nodes < budget:
         orders, turned = _moves(order, rotations)
         bounds = _loop_bounds(search, orders, turned)
-        prefix = [_root(search)]  # the current loop's states, one per piece placed
-        for j, rotation in zip(order[1:].tolist(), rotations[1:].tolist(), strict=True):
-            state = _extend_to(search, prefix[-1], j, rotation)
-            assert state is not None  # a loop found before: its walls do not cross
-            prefix.append(state)
+        root = _root(search)
+        laid = _laid_after(search, root, order[1:].tolist(), rotations[1:].tolist())
+        assert laid is not None  # a loop found before: its walls do not cross
+        prefix = [root, *laid]  # the current loop's states, one per piece placed
         moved = None
         for c in np.argsort(bounds, kind="stable").tolist():
             if bounds[c] >= best.energy or search.nodes >= budget:
                 break
             first = int(np.flatnonzero((orders[c] != order) | (turned[c] != rotations))[0])
-            placed, leaf = prefix[first - 1], None
-            rest = zip(orders[c, first:].tolist(), turned[c, first:].tolist(), strict=True)
-            for j, rotation in rest:
-                extended = _extend_to(search, placed, j, rotation)
-                if extended is None:
-                    break  # walls cross
-                placed = extended
-            else:
-                leaf = _leaf(search, placed)
+            laid = _laid_after(
+                search, prefix[first - 1], orders[c, first:].tolist(), turned[c, first:].tolist()
+            )
+            leaf = None if laid is None else _leaf(search, laid[-1])  # None: walls cross
             if leaf is None:
                 continue
             search.record(leaf)
