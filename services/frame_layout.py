@@ -19,7 +19,14 @@ import numpy as np
 
 from schemas.frames import IntrinsicsModel
 from schemas.params import PipelineParams
-from services.frustum import CameraView, in_any_view, side_rays, swept_cells, view_angle
+from services.frustum import (
+    CameraView,
+    in_any_view,
+    side_rays,
+    swept_cells,
+    view_angle,
+    visible_band,
+)
 from services.geometry import unique_cells
 from services.local_layout import FOOTPRINT_CELL, boundary_points, footprint_cells
 from services.manhattan import estimate_manhattan_frame, thin_with_normals
@@ -238,6 +245,10 @@ def _flatten_ends(kp: FloatArray) -> FloatArray:
 _PAST_CORNER_MIN = 0.2  # m, least wall evidence past a turn that says the turn was early
 _PAST_CORNER_MAX = 1.0  # m, most (deeper than furniture stands: another wall's evidence)
 _MAX_REVEAL = 0.35  # m, longest end wall read as a door's or window's reveal
+# m over the floor: a column seen no higher shows no more of a wall than of a cabinet's,
+# shelf's or wardrobe's side (tune frames, three cameras: of the short end walls seen no
+# higher, 11 were sides and none a wall; from there to 1.6 m, 9 sides and 6 walls)
+_JUDGED_HEIGHT = 1.4
 
 
 def _cross(a: FloatArray, b: FloatArray) -> float:
@@ -294,6 +305,50 @@ def _drop_end_reveals(keypoints: FloatArray) -> FloatArray:
         if _cross(first, after) < 0 and np.linalg.norm(first) < _MAX_REVEAL:
             kp = kp[1:]
     return kp
+
+
+def _drop_end_sides(
+    keypoints: FloatArray, views: Sequence[CameraView], floor_z: float
+) -> FloatArray:
+    """The chain without end walls that may be a furniture's side.
+
+    Where a frame's view ends beside a wardrobe or shelf against a wall, the chain can start
+    (or end) on the furniture's side: a wall less than ``_MAX_FURNITURE_DEPTH`` long that
+    meets the room's wall at a convex corner (a left turn, interior on the left), as a
+    room's own corner would. Low down the two look the same, so such an end wall is dropped
+    when no camera saw any of its columns up to ``_JUDGED_HEIGHT`` (at a view's bottom
+    corner a camera sees only the lower part of what stands there). A room's corner dropped
+    so loses little: the chain still ends at the corner, and a neighbour sees the wall that
+    turns. The wall left must be longer than the one dropped.
+    """
+    kp = keypoints
+    # The target end (a left turn onto a short last wall), then the source end (a short
+    # first wall with a left turn after it).
+    if len(kp) >= 3 and _side_like(kp[-2] - kp[-3], kp[-1] - kp[-2]):
+        kp = kp if _seen_high(kp[-2:], views, floor_z) else kp[:-1]
+    if len(kp) >= 3 and _side_like(kp[2] - kp[1], kp[0] - kp[1]):
+        kp = kp if _seen_high(kp[:2], views, floor_z) else kp[1:]
+    return kp
+
+
+def _side_like(along: FloatArray, end: FloatArray) -> bool:
+    """Whether an end wall (the floor-plan step ``end`` from its corner to its free end) is
+    as short as a furniture's side, shorter than the wall ``along`` it meets (chain order),
+    and stands on the room's side of that wall (its left)."""
+    length = float(np.linalg.norm(end))
+    return (
+        _cross(along, end) > 0
+        and length < _MAX_FURNITURE_DEPTH
+        and length < float(np.linalg.norm(along))
+    )
+
+
+def _seen_high(wall: FloatArray, views: Sequence[CameraView], floor_z: float) -> bool:
+    """Whether some camera saw a column of the wall (2, 2) up to ``_JUDGED_HEIGHT`` over the
+    floor."""
+    samples = wall[0] + np.linspace(0.1, 0.9, 5)[:, None] * (wall[1] - wall[0])
+    _, high = visible_band(views, samples)
+    return bool(np.any(high >= floor_z + _JUDGED_HEIGHT))  # NaN (unseen) compares False
 
 
 def _without_furniture(keypoints: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
@@ -511,6 +566,8 @@ def estimate_frame_layout(
             view_angle=across,
         )
     kp = _to_frustum_edges(_without_furniture(chain.keypoints, lines), lines, views)
+    # An end wall's length is known once it reaches the view's edge.
+    kp = _drop_end_sides(kp, views, frame.floor_z)
     if len(kp) == 2 and len(views) == 1:
         around = _wall_around_opening(kp, aligned, normals, frame.floor_z, views[0])
         kp = kp if around is None else around

@@ -12,6 +12,7 @@ import pytest
 from schemas.params import PipelineParams
 from services.frame_layout import (
     _drop_end_reveals,
+    _drop_end_sides,
     _flatten_corner_fronts,
     _flatten_furniture,
     _floor,
@@ -174,6 +175,30 @@ def test_a_corner_hidden_by_a_wardrobe_is_found_behind_an_openings_reveal() -> N
     np.testing.assert_allclose(
         _without_furniture(chain, [wall]), [[3.0, 3.0], [-0.48, 3.0], [-0.48, 1.0]], atol=0.05
     )
+
+
+def test_an_end_wall_as_short_as_a_furnitures_side_is_dropped_unless_seen_up_high() -> None:
+    # Along y = 2 travelling -x (room below), the chain ends on a 0.4 m wall turning into the
+    # room (a left turn): a shelf's side, or a room's corner. The level camera sees that
+    # column up to 0.8-0.95 m over itself: 1.1-1.25 m over a floor 0.3 m under it, too low
+    # to tell a wall from a shelf; 1.8-1.95 m over a floor 1 m under it.
+    view = CameraView.from_intrinsics(KINECT, LEVEL, np.zeros(3))
+    chain = np.array([[3.0, 2.0], [0.0, 2.0], [0.0, 1.6]])
+    seen_low, seen_high = -0.3, -1.0
+    np.testing.assert_allclose(_drop_end_sides(chain, [view], seen_low), chain[:2])
+    np.testing.assert_allclose(_drop_end_sides(chain, [view], seen_high), chain)
+    # The same at the source end, walked the other way round.
+    source = np.array([[0.0, 1.6], [0.0, 2.0], [-3.0, 2.0]])
+    np.testing.assert_allclose(_drop_end_sides(source, [view], seen_low), source[1:])
+    # Deeper than furniture stands: the room's own.
+    deep = np.array([[3.0, 2.0], [0.0, 2.0], [0.0, 1.1]])
+    np.testing.assert_allclose(_drop_end_sides(deep, [view], seen_low), deep)
+    # Of two short walls only the shorter can be a side.
+    short = np.array([[0.5, 2.0], [0.0, 2.0], [0.0, 1.6]])
+    np.testing.assert_allclose(_drop_end_sides(short, [view], seen_low), short[:2])
+    # Turning away from the room is no furniture's side (a reveal: _drop_end_reveals).
+    away = np.array([[3.0, 2.0], [0.0, 2.0], [0.0, 2.4]])
+    np.testing.assert_allclose(_drop_end_sides(away, [view], seen_low), away)
 
 
 def test_the_cells_a_camera_saw_through_reach_its_wall_but_not_past_a_stray_point() -> None:
