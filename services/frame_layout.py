@@ -33,7 +33,13 @@ from services.manhattan import estimate_manhattan_frame, thin_with_normals
 from services.rgbd import OPTICAL_TO_LEVEL, RgbdFrame, backproject
 from services.types import FloatArray, LocalLayout, ManhattanFrame, ProgressFn
 from services.wall_graph import find_wall_chain
-from services.wall_lines import MAX_DOORWAY, WallLine, find_wall_lines, offset_peaks
+from services.wall_lines import (
+    MAX_DOORWAY,
+    MAX_FURNITURE_DEPTH,
+    WallLine,
+    find_wall_lines,
+    offset_peaks,
+)
 
 _FLAT_COS = float(np.cos(np.radians(10.0)))  # a normal this close to +z: horizontal surface
 _SPACING = 0.03  # m, largest spacing of a frame's points at 4 m (sets the pixel stride)
@@ -42,7 +48,6 @@ _MIN_FLOOR_POINTS = 50
 _MIN_HEIGHT, _MAX_HEIGHT = 0.2, 2.5  # m, camera heights over a floor that can be one
 _MAX_EXTENSION = 3.0  # m, farthest a chain end is moved out to the frustum's edge
 _MIN_TURN = 0.3  # m, least length of a wall the chain's last wall turns onto (a reveal is less)
-_MAX_FURNITURE_DEPTH = 0.75  # m, deepest step into the room read as a furniture front
 _ON_LINE = 0.1  # m, a keypoint this close to a wall's line lies on it
 _SEED_PLANES = 2  # planes peeled off when looking for the floor's normal
 _LEVEL_BIN = 0.02  # m, height histogram bin of the floor search
@@ -159,7 +164,7 @@ def _inward_depth(keypoints: FloatArray, k: int, points: FloatArray) -> FloatArr
 
 
 def _shallow(depth: FloatArray) -> bool:
-    return bool(len(depth) and np.all(depth > -_ON_LINE) and np.all(depth < _MAX_FURNITURE_DEPTH))
+    return bool(len(depth) and np.all(depth > -_ON_LINE) and np.all(depth < MAX_FURNITURE_DEPTH))
 
 
 def _flatten_furniture(keypoints: FloatArray) -> FloatArray:
@@ -167,7 +172,7 @@ def _flatten_furniture(keypoints: FloatArray) -> FloatArray:
 
     Seen from one camera a wardrobe or shelf against a wall looks like the wall itself: it
     stands taller than the band the camera sees, and the wall behind it is hidden. A chain
-    that leaves a wall, runs less than ``_MAX_FURNITURE_DEPTH`` into the room and returns to
+    that leaves a wall, runs less than ``MAX_FURNITURE_DEPTH`` into the room and returns to
     the same line (or ends there) went round such a front; the wall goes straight on. A room's
     own pillar or recess shallower than that is flattened too (a frame cannot tell them).
 
@@ -195,7 +200,7 @@ def _flatten_corner_fronts(keypoints: FloatArray) -> FloatArray:
 
     A wardrobe against wall B, next to the corner with wall A, hides that corner: the chain
     runs along A, turns onto the wardrobe's front F (parallel to B, less than
-    ``_MAX_FURNITURE_DEPTH`` in front of it) and steps back out to B along the wardrobe's
+    ``MAX_FURNITURE_DEPTH`` in front of it) and steps back out to B along the wardrobe's
     side G; the room's corner is where A's and B's lines meet. Whether or not G was seen:
     from most stances a wardrobe's side is, and a frame cannot tell a step of the room that
     shallow from a wardrobe (as :func:`_flatten_furniture` assumes along a wall). Checked in
@@ -211,7 +216,7 @@ def _flatten_corner_fronts(keypoints: FloatArray) -> FloatArray:
             if (
                 _same_travel(kp, k + 1, k + 3)
                 and _same_travel(kp, k, k + 2)
-                and np.all((depth > _ON_LINE) & (depth < _MAX_FURNITURE_DEPTH))
+                and np.all((depth > _ON_LINE) & (depth < MAX_FURNITURE_DEPTH))
             ):
                 along = _unit(kp[k + 1] - kp[k])
                 corner = kp[k] + float((kp[k + 3] - kp[k]) @ along) * along
@@ -313,7 +318,7 @@ def _drop_end_sides(
     """The chain without end walls that may be a furniture's side.
 
     Where a frame's view ends beside a wardrobe or shelf against a wall, the chain can start
-    (or end) on the furniture's side: a wall less than ``_MAX_FURNITURE_DEPTH`` long that
+    (or end) on the furniture's side: a wall less than ``MAX_FURNITURE_DEPTH`` long that
     meets the room's wall at a convex corner (a left turn, interior on the left), as a
     room's own corner would. Low down the two look the same, so such an end wall is dropped
     when no camera saw any of its columns up to ``_JUDGED_HEIGHT`` (at a view's bottom
@@ -338,7 +343,7 @@ def _side_like(along: FloatArray, end: FloatArray) -> bool:
     length = float(np.linalg.norm(end))
     return (
         _cross(along, end) > 0
-        and length < _MAX_FURNITURE_DEPTH
+        and length < MAX_FURNITURE_DEPTH
         and length < float(np.linalg.norm(along))
     )
 
@@ -441,7 +446,7 @@ def _wall_around_opening(
     Through a door or a window a camera sees the next room's wall, full height and wider
     than the room's own wall beside or below the opening (a jamb, a pier, a sill), so the
     chain runs along the far wall. The room's wall is then a standing surface facing the
-    same way, more than furniture stands (``_MAX_FURNITURE_DEPTH``) in front of the far one,
+    same way, more than furniture stands (``MAX_FURNITURE_DEPTH``) in front of the far one,
     filling a good share of the view. Furniture that stands free in front of a wall shows
     its top or its sides to the camera, deeper than a wall is thick; a wall's opening shows
     only its reveals and sill. The returned chain runs along that surface from the
@@ -457,7 +462,7 @@ def _wall_around_opening(
     depth = (aligned[:, across] - centre[across]) * side  # how far out, towards the far wall
     azimuth = np.degrees(np.arctan2(aligned[:, axis] - centre[axis], depth))
     facing = (np.abs(normals[:, 2]) < _UPRIGHT_SIN) & (np.abs(normals[:, across]) > _FACING_COS)
-    nearer = facing & (depth > _NEAR_CAMERA) & (depth < far - _MAX_FURNITURE_DEPTH)
+    nearer = facing & (depth > _NEAR_CAMERA) & (depth < far - MAX_FURNITURE_DEPTH)
     if np.count_nonzero(nearer) < _MIN_SURFACE_POINTS:
         return None
     peak = float(offset_peaks(depth[nearer], 0.0)[0])  # the strongest
@@ -475,7 +480,7 @@ def _wall_around_opening(
     reach = lateral[surface]
     behind = (
         (depth > offset + _ON_LINE)
-        & (depth < offset + _MAX_FURNITURE_DEPTH)
+        & (depth < offset + MAX_FURNITURE_DEPTH)
         & (lateral >= reach.min() - _ON_LINE)
         & (lateral <= reach.max() + _ON_LINE)
     )

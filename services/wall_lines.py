@@ -31,6 +31,7 @@ _HIST_BIN = 0.01  # m, offset histogram resolution
 _LINE_TOLERANCE = 0.05  # m, wall points kept around a line offset
 _MERGE_DISTANCE = 0.15  # m, parallel peaks closer than this are one wall
 _NEAR_STRIP = 0.12  # m, the strips skip the wall's own noisy band
+MAX_FURNITURE_DEPTH = 0.75  # m, deepest step into the room read as a furniture front
 _FAR_STRIP = 1.0  # m, depth of the strips in front of and behind a wall
 _MIN_BEHIND = 0.5  # m, the shallowest strip a bridge is checked with (one camera)
 _BEHIND_RATIO = 0.3  # behind/front occupancy above which a cell is not a boundary
@@ -664,7 +665,9 @@ def _facing_cameras(
     and no nearer wall stands between it and them (a wall seen through a door or window of
     a nearer one is the next room's). Cells seen through a nearer line's wall points (at any
     height: a window leaves wall below and above it) or through a door in it
-    (:func:`_doors_closed`) lose their evidence. Cells in a nearer wall's shadow
+    (:func:`_doors_closed`; not when the nearer line stands less than
+    ``MAX_FURNITURE_DEPTH`` before the wall: the gap between two furniture fronts shows the
+    wall behind them) lose their evidence. Cells in a nearer wall's shadow
     (:func:`_shadowed`) are not taken for open space, whatever lies in front of them."""
     centre = np.mean([view.centre[:2] for view in views], axis=0)
     facing = _turned_to_camera(lines, centre)
@@ -681,9 +684,14 @@ def _facing_cameras(
             if not 0.0 < ratio < 1.0 - _NEAR_STRIP:
                 continue
             away = float(np.sign(far.offset - near.offset))
-            if (n, away) not in closed:
-                closed[n, away] = _doors_closed(near, lines, away)
-            occupied = closed[n, away]
+            if abs(far.offset - near.offset) < MAX_FURNITURE_DEPTH:
+                # Fronts of furniture standing before the wall: the gap between two of
+                # them shows the wall, it is no doorway of theirs.
+                occupied = near.occupied
+            else:
+                if (n, away) not in closed:
+                    closed[n, away] = _doors_closed(near, lines, away)
+                occupied = closed[n, away]
             cell = np.rint((c_run + (run - c_run) * ratio - near.origin) / near.cell_size)
             inside = (cell >= 0) & (cell < len(occupied))
             index = cell[inside].astype(np.int64)

@@ -12,6 +12,7 @@ from functools import cache
 import numpy as np
 import open3d as o3d
 
+from schemas.frames import IntrinsicsModel
 from services.rgbd import RgbdFrame, encode_frame_files
 from services.synthetic.furniture import Furnishing
 from services.synthetic.render import (
@@ -53,17 +54,19 @@ def render_views(
     room: Room,
     furnishing: Furnishing,
     stances: dict[str, tuple[tuple[float, float, float], float, float]],
+    camera: IntrinsicsModel = KINECT,
 ) -> dict[str, tuple[RgbdFrame, np.ndarray]]:
-    """Noise-free Kinect frames of a room: name -> (frame, its (4, 4) optical -> world pose)
-    for each stance name -> (camera position (x, y, z), yaw and pitch in degrees)."""
+    """Noise-free frames of a room (Kinect unless ``camera``): name -> (frame, its (4, 4)
+    optical -> world pose) for each stance name -> (camera position (x, y, z), yaw and
+    pitch in degrees)."""
     vertices, triangles, material = scene_mesh(room, furnishing)
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.core.Tensor.from_numpy(vertices), o3d.core.Tensor.from_numpy(triangles))
     out = {}
     for name, (position, yaw, pitch) in stances.items():
         pose = camera_pose(np.array(position), math.radians(yaw), math.radians(pitch), 0.0)
-        render = render_frame(scene, material, pose, KINECT, 7.0)
-        out[name] = (RgbdFrame(render.depth, KINECT, render.color), pose)
+        render = render_frame(scene, material, pose, camera, 7.0)
+        out[name] = (RgbdFrame(render.depth, camera, render.color), pose)
     return out
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from schemas.frames import IntrinsicsModel
 from schemas.params import PipelineParams
 from services.evaluation import evaluate_result, keypoint_error
 from services.frame_layout import estimate_rgbd_layout, frame_points
@@ -15,6 +16,7 @@ from services.pipeline import place_site
 from services.synthetic.furniture import Box, Furnishing, Opening
 from services.synthetic.render import (
     CAMERAS,
+    KINECT,
     FrameSpec,
     frame_ground_truth_json,
     generate_frame_scene,
@@ -138,10 +140,14 @@ def test_the_wall_of_the_next_room_seen_through_a_door_is_not_the_frames_wall(
 
 
 def _world_chain(
-    room: Room, furnishing: Furnishing, stance: tuple[tuple[float, float, float], float, float]
+    room: Room,
+    furnishing: Furnishing,
+    stance: tuple[tuple[float, float, float], float, float],
+    camera: IntrinsicsModel = KINECT,
 ) -> np.ndarray:
-    """The (K, 2) world floor-plan chain a Kinect frame taken from ``stance`` finds."""
-    frame, pose = render_views(room, furnishing, {"f": stance})["f"]
+    """The (K, 2) world floor-plan chain a frame (Kinect unless ``camera``) taken from
+    ``stance`` finds."""
+    frame, pose = render_views(room, furnishing, {"f": stance}, camera)["f"]
     layout = estimate_rgbd_layout(frame)
     assert layout.ok
     world: np.ndarray = (layout.keypoints_local() @ pose[:3, :3].T + pose[:3, 3])[:, :2]
@@ -186,6 +192,25 @@ def test_a_low_box_standing_free_in_front_of_the_wall_is_not_read_as_the_wall(
     box = Box(np.array([1.4, 2.1, 0.0]), np.array([2.0, 2.9, height]))
     world = _world_chain(room, Furnishing(boxes=(box,)), ((3.2, 2.5, 1.3), 180.0, -8.0))
     np.testing.assert_allclose(world[:, 0], 0.0, atol=0.05)
+
+
+@pytest.mark.parametrize("pitch", [-5.0, -7.3, -10.0])
+def test_the_wall_seen_between_two_tall_furniture_fronts_is_no_doorway(pitch: float) -> None:
+    # Along the wall y = 4.32 stand a wardrobe (x 0.55-1.51), a desk (1.9-3.45) and a shelf
+    # (3.6-5.54), their fronts 0.6-0.7 m out. A wide-angle camera 4.3 m down the room sees
+    # the wall over the desk between the two tall fronts. Those fronts are no door jambs:
+    # the wall seen between them is the room's, and the chain turns at its corner with x = 0.
+    room = Room.from_polygon(np.array([[0.0, 1.31], [6.8, 1.31], [6.8, 4.32], [0.0, 4.32]]), 2.64)
+    boxes = (
+        Box(np.array([0.55, 3.72, 0.0]), np.array([1.51, 4.29, 2.07])),
+        Box(np.array([1.9, 3.6, 0.0]), np.array([3.45, 4.3, 0.73])),
+        Box(np.array([3.6, 3.71, 0.0]), np.array([5.54, 4.28, 1.95])),
+    )
+    stance = ((4.33, 2.99, 1.33), -177.0, pitch)
+    world = _world_chain(room, Furnishing(boxes=boxes), stance, WIDE)
+    np.testing.assert_allclose(world[0, 1], 4.32, atol=0.05)
+    np.testing.assert_allclose(world[1], [0.0, 4.32], atol=0.08)
+    np.testing.assert_allclose(world[2], [0.0, 1.31], atol=0.08)
 
 
 @pytest.mark.parametrize(("x", "y", "yaw"), [(4.0, 1.3, 129.0), (3.8, 1.4, 125.0)])
