@@ -12,7 +12,7 @@ As for a point cloud (:mod:`services.local_layout`) with three changes:
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -300,16 +300,10 @@ def _drop_end_reveals(keypoints: FloatArray) -> FloatArray:
     at a protruding corner is seen longer than that. Run after the furniture flattening (a
     shelf's front seen past its side makes the same short right turn, and is flattened).
     """
-    kp = keypoints
-    if len(kp) >= 3:  # the target end: a right turn onto a short last wall
-        last, before = kp[-1] - kp[-2], kp[-2] - kp[-3]
-        if _cross(before, last) < 0 and np.linalg.norm(last) < _MAX_REVEAL:
-            kp = kp[:-1]
-    if len(kp) >= 3:  # the source end: a short first wall with a right turn after it
-        first, after = kp[1] - kp[0], kp[2] - kp[1]
-        if _cross(first, after) < 0 and np.linalg.norm(first) < _MAX_REVEAL:
-            kp = kp[1:]
-    return kp
+    return _drop_ends(
+        keypoints,
+        lambda along, end, _: bool(_cross(along, end) < 0 and np.linalg.norm(end) < _MAX_REVEAL),
+    )
 
 
 def _drop_end_sides(
@@ -326,13 +320,24 @@ def _drop_end_sides(
     so loses little: the chain still ends at the corner, and a neighbour sees the wall that
     turns. The wall left must be longer than the one dropped.
     """
+    return _drop_ends(
+        keypoints,
+        lambda along, end, wall: _side_like(along, end) and not _seen_high(wall, views, floor_z),
+    )
+
+
+def _drop_ends(
+    keypoints: FloatArray, drops: Callable[[FloatArray, FloatArray, FloatArray], bool]
+) -> FloatArray:
+    """The chain without the end walls ``drops`` picks, target end first. For each end it is
+    asked with the wall the end wall meets (``along``, in chain order), the floor-plan step
+    from their corner to the chain's free end (``end``: the end wall stands on the room's
+    side of ``along`` when it is a left turn) and the end wall's two keypoints (2, 2)."""
     kp = keypoints
-    # The target end (a left turn onto a short last wall), then the source end (a short
-    # first wall with a left turn after it).
-    if len(kp) >= 3 and _side_like(kp[-2] - kp[-3], kp[-1] - kp[-2]):
-        kp = kp if _seen_high(kp[-2:], views, floor_z) else kp[:-1]
-    if len(kp) >= 3 and _side_like(kp[2] - kp[1], kp[0] - kp[1]):
-        kp = kp if _seen_high(kp[:2], views, floor_z) else kp[1:]
+    if len(kp) >= 3 and drops(kp[-2] - kp[-3], kp[-1] - kp[-2], kp[-2:]):
+        kp = kp[:-1]
+    if len(kp) >= 3 and drops(kp[2] - kp[1], kp[0] - kp[1], kp[:2]):
+        kp = kp[1:]
     return kp
 
 
