@@ -38,6 +38,8 @@ _NORMAL_RADIUS = 3.0  # neighbourhood radius for normals, in voxel sizes
 # the radius gets no normal of its own (open3d leaves it pointing up, i.e. floor).
 _SPACING_RADIUS = 2.5
 _SPACING_SAMPLE = 2_000  # points whose nearest neighbour measures the spacing
+_DENSE_GRID = 1 << 22  # voxel grids up to this size are thinned by counting (32 MB)
+_DENSE_RATIO = 16  # ... when they hold at most this many voxels per point
 # Thinning that kept more than this share of the points left most voxels with one point:
 # only then can the points lie further apart than the voxels (a dense scan or an RGB-D
 # frame keeps a third or less, and skips the measurement).
@@ -103,7 +105,16 @@ def voxel_thin(points: FloatArray, size: float) -> FloatArray:
     cells = np.floor((points - origin) / size).astype(np.int64)
     extent = cells.max(axis=0) + 1
     keys = (cells[:, 0] * extent[1] + cells[:, 1]) * extent[2] + cells[:, 2]
-    _, voxel, counts = np.unique(keys, return_inverse=True, return_counts=True)
+    grid = int(extent[0]) * int(extent[1]) * int(extent[2])
+    if grid <= min(_DENSE_GRID, _DENSE_RATIO * len(points)):
+        # A grid about the size of the scan: counting per voxel is cheaper than sorting the
+        # keys, and gives the same voxels in the same (key) order.
+        per_voxel = np.bincount(keys, minlength=grid)
+        occupied = per_voxel > 0
+        voxel = (np.cumsum(occupied) - 1)[keys]
+        counts = per_voxel[occupied]
+    else:
+        _, voxel, counts = np.unique(keys, return_inverse=True, return_counts=True)
     sums = np.column_stack(
         [np.bincount(voxel, weights=points[:, axis], minlength=len(counts)) for axis in range(3)]
     )

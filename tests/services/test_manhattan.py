@@ -7,6 +7,7 @@ import open3d as o3d
 import pytest
 
 from schemas.params import ManhattanParams
+from services import manhattan
 from services.manhattan import (
     estimate_manhattan_frame,
     point_spacing,
@@ -109,6 +110,16 @@ def test_voxel_thinning_keeps_open3ds_voxels_in_an_order_of_its_own():
     assert np.allclose(thinned[np.lexsort(thinned.T)], theirs_sorted, atol=1e-12)
     shuffled = points[np.random.default_rng(0).permutation(len(points))]
     assert np.allclose(voxel_thin(shuffled, 0.05), thinned, atol=1e-12)  # same voxels, same order
+
+
+@pytest.mark.parametrize(("n", "span"), [(300_000, 8.0), (2_000, 1.0), (3, 0.01), (1, 1.0)])
+def test_voxels_counted_on_a_small_grid_are_the_sorted_ones(n, span, monkeypatch):
+    # Grids about the size of the scan are thinned by counting, larger ones by sorting the
+    # voxel keys: both give the same voxels in the same order, to the last bit.
+    points = np.random.default_rng(n).uniform(0.0, span, (n, 3))
+    counted = voxel_thin(points, 0.05)
+    monkeypatch.setattr(manhattan, "_DENSE_GRID", 0)
+    assert np.array_equal(voxel_thin(points, 0.05), counted)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
