@@ -19,12 +19,15 @@ For every scene of a split whose main room is wrong, one cause:
   ranking after refinement, the wall check or the calibration chose it).
 
 Run ``python -m bench.failure_anatomy`` (``--split``, ``--per-bucket``, ``--real``); it reads
-the layouts ``bench.placement_trust`` caches and builds those missing.
+the layouts ``bench.placement_trust`` caches and builds those missing. With ``--frames
+CAMERA`` it looks at rendered RGB-D frame rooms instead (``bench.rgbd_frames``: each frame
+laid out on its own; ``--seed``, ``--scenes``, ``--shapes``), bucketed by frames per room.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from collections import Counter, defaultdict
 from collections.abc import Sequence
@@ -36,6 +39,7 @@ from rich import box
 from rich.console import Console
 from rich.table import Table
 
+from bench.rgbd_frames import cached_scenes, frame_outlines
 from bench.scoring import add_params_option, chain_error_in_plan, params_with, true_assembly
 from bench.world_scenes import (
     DEFAULT_CACHE,
@@ -51,8 +55,9 @@ from services.evaluation import evaluate_result
 from services.pipeline import place_site
 from services.placement import evaluate_placement, make_piece
 from services.placement.energy import FEATURES, feature_weights
+from services.synthetic.render import CAMERAS
 
-__all__ = ["CAUSES", "Anatomy", "anatomy_of", "main"]
+__all__ = ["CAUSES", "Anatomy", "anatomy_of", "frame_scenes", "main"]
 
 CAUSES = ("layout", "not a loop", "search", "energy", "geometry", "ranking")
 
@@ -118,6 +123,20 @@ def anatomy_of(scene: CachedScene, params: PipelineParams) -> Anatomy:
     else:
         cause = "ranking"
     return _with(base, cause, gap, terms)
+
+
+def frame_scenes(
+    camera: str, n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams
+) -> list[CachedScene]:
+    """Rendered frame rooms seen by ``CAMERAS[camera]`` (real room shapes with ``shapes``),
+    each frame laid out on its own, named as one set ("wide synthetic", "wide shapes")."""
+    split = "tune" if first_seed >= 2000 else "test"
+    outlines = frame_outlines(split) if shapes else None
+    name = f"{camera} {'shapes' if shapes else 'synthetic'}"
+    return [
+        dataclasses.replace(scene, name=name)
+        for scene in cached_scenes(n_scenes, first_seed, outlines, params, camera)
+    ]
 
 
 def _chains_right_in_plan(result: dict[str, Any], truth: dict[str, Any]) -> bool:
@@ -187,13 +206,23 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--real", type=int, default=200, help="real room shapes (2-8 fragments)")
     parser.add_argument("--workers", type=int, default=2, help="processes building layouts")
     parser.add_argument("--list", action="store_true", help="print every wrong scene")
+    parser.add_argument(
+        "--frames", choices=sorted(CAMERAS), help="rendered RGB-D frame rooms of this camera"
+    )
+    parser.add_argument("--seed", type=int, default=2000, help="frames: first seed (tune 2000+)")
+    parser.add_argument("--scenes", type=int, default=60, help="frames: rooms")
+    parser.add_argument("--shapes", action="store_true", help="frames: real room shapes")
     add_params_option(parser)
     args = parser.parse_args(argv)
     console = Console(width=None if sys.stdout.isatty() else 160)
-    jobs = scene_jobs(args.split, args.per_bucket, args.real, DEFAULT_CACHE)
-    build_sets(jobs, args.workers, lambda line: console.log(f"layouts {line}"))
     params = params_with(args.set)
-    rows = [anatomy_of(scene, params) for scene in load_set(jobs)]
+    if args.frames:
+        scenes = frame_scenes(args.frames, args.scenes, args.seed, args.shapes, params)
+    else:
+        jobs = scene_jobs(args.split, args.per_bucket, args.real, DEFAULT_CACHE)
+        build_sets(jobs, args.workers, lambda line: console.log(f"layouts {line}"))
+        scenes = list(load_set(jobs))
+    rows = [anatomy_of(scene, params) for scene in scenes]
     if args.list:
         by_cause: dict[str, list[str]] = defaultdict(list)
         for r in rows:

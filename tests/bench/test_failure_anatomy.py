@@ -7,7 +7,15 @@ import dataclasses
 import pytest
 from rich.console import Console
 
-from bench.failure_anatomy import CAUSES, Anatomy, anatomy_of, cause_table, term_table
+from bench.failure_anatomy import (
+    CAUSES,
+    Anatomy,
+    anatomy_of,
+    cause_table,
+    frame_scenes,
+    main,
+    term_table,
+)
 from bench.world_scenes import CachedScene
 from schemas.params import PipelineParams
 from services.synthetic import ground_truth_json
@@ -89,3 +97,12 @@ def test_a_floor_height_off_is_not_blamed_on_the_layout() -> None:
     layouts = {**scene.layouts, fid: dataclasses.replace(layout, frame=lowered)}
     anatomy = anatomy_of(dataclasses.replace(scene, layouts=layouts), _with(weight_hull=30.0))
     assert anatomy.cause == "energy"
+
+
+def test_frame_rooms_are_one_set_bucketed_by_frames(capsys: pytest.CaptureFixture[str]) -> None:
+    # Two rendered wide-angle rooms of three frames each: one set, the 2-3 bucket.
+    scenes = frame_scenes("wide", 2, 2000, False, PipelineParams())
+    assert [s.name for s in scenes] == ["wide synthetic"] * 2
+    assert [s.n_fragments for s in scenes] == [3, 3]
+    assert main(["--frames", "wide", "--scenes", "2", "--seed", "2000"]) == 0
+    assert "wide synthetic 2-3" in capsys.readouterr().out
