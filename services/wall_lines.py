@@ -683,12 +683,13 @@ def _facing_cameras(
             ratio = (near.offset - c_off) / (far.offset - c_off)
             if not 0.0 < ratio < 1.0 - _NEAR_STRIP:
                 continue
-            away = float(np.sign(far.offset - near.offset))
-            if abs(far.offset - near.offset) < MAX_FURNITURE_DEPTH:
+            depth = far.offset - near.offset
+            if abs(depth) < MAX_FURNITURE_DEPTH:
                 # Fronts of furniture standing before the wall: the gap between two of
                 # them shows the wall, it is no doorway of theirs.
                 occupied = near.occupied
             else:
+                away = float(np.sign(depth))
                 if (n, away) not in closed:
                     closed[n, away] = _doors_closed(near, lines, away)
                 occupied = closed[n, away]
