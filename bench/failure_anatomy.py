@@ -39,7 +39,7 @@ from rich import box
 from rich.console import Console
 from rich.table import Table
 
-from bench.rgbd_frames import cached_scenes, frame_outlines
+from bench.rgbd_frames import cached_scenes, outlines_for_seeds
 from bench.scoring import add_params_option, chain_error_in_plan, params_with, true_assembly
 from bench.world_scenes import (
     DEFAULT_CACHE,
@@ -133,8 +133,7 @@ def frame_scenes(
 ) -> list[CachedScene]:
     """Rendered frame rooms seen by ``CAMERAS[camera]`` (real room shapes with ``shapes``),
     each frame laid out on its own, named as one set ("wide synthetic", "wide shapes")."""
-    split = "tune" if first_seed >= 2000 else "test"
-    outlines = frame_outlines(split) if shapes else None
+    outlines = outlines_for_seeds(first_seed) if shapes else None
     name = f"{camera} {'shapes' if shapes else 'synthetic'}"
     return [
         dataclasses.replace(scene, name=name)

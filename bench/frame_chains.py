@@ -26,7 +26,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run as a script, the repository's packages are importable
 
-from bench.rgbd_frames import cached_scenes, frame_outlines  # noqa: E402
+from bench.rgbd_frames import cached_scenes, outlines_for_seeds  # noqa: E402
 from bench.scoring import add_params_option, chain_error_in_plan, params_with  # noqa: E402
 from bench.world_scenes import CachedScene  # noqa: E402
 from schemas.params import PipelineParams  # noqa: E402
@@ -108,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     add_params_option(parser)
     args = parser.parse_args(argv)
     params = params_with(args.set)
-    outlines = frame_outlines("tune" if args.seed >= 2000 else "test") if args.shapes else None
+    outlines = outlines_for_seeds(args.seed) if args.shapes else None
     scenes = cached_scenes(args.scenes, args.seed, outlines, params, args.camera)
     total, wrong = wrong_chains(scenes, params)
     for chain in wrong:

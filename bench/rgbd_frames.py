@@ -265,8 +265,7 @@ def _table(n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams,
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     figures = {"synthetic": run(n_scenes, first_seed, None, params, name)}
     print(_row("synthetic", figures["synthetic"]))
-    # Tune seeds (2000 and up) draw the shapes' tune split, held-out seeds its test split.
-    outlines = frame_outlines("tune" if first_seed >= 2000 else "test") if shapes else []
+    outlines = outlines_for_seeds(first_seed) if shapes else []
     if outlines:
         shaped = run(n_scenes, first_seed, outlines, params, name)
         figures["MatterportLayout shapes"] = shaped
@@ -290,6 +289,12 @@ def frame_outlines(split: str) -> list[FloatArray]:
     tune, test = split_houses(house for house, _ in shapes)
     chosen = tune if split == "tune" else test
     return [p for h, p in shapes if h in chosen and float(np.ptp(p, axis=0).max()) <= 9.0]
+
+
+def outlines_for_seeds(first_seed: int) -> list[FloatArray]:
+    """The real room outlines scenes of seeds ``first_seed`` on are drawn from: tune seeds
+    (2000 and up) draw the shapes' tune split, held-out seeds its test split."""
+    return frame_outlines("tune" if first_seed >= 2000 else "test")
 
 
 Result = TypeVar("Result")
@@ -380,7 +385,7 @@ def _anatomy(
     n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams, camera: str
 ) -> None:
     """Print how many scenes each limit decides, synthetic (and real shapes)."""
-    outlines = frame_outlines("tune" if first_seed >= 2000 else "test") if shapes else []
+    outlines = outlines_for_seeds(first_seed) if shapes else []
     runs = side_by_side(limits, n_scenes, first_seed, outlines, params, camera)
     print("| rooms | scenes | " + " | ".join(LIMITS) + " |")
     print("|---|---|" + "---|" * len(LIMITS))
