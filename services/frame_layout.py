@@ -254,6 +254,13 @@ _MAX_REVEAL = 0.35  # m, longest end wall read as a door's or window's reveal
 # shelf's or wardrobe's side (tune frames, three cameras: of the short end walls seen no
 # higher, 11 were sides and none a wall; from there to 1.6 m, 9 sides and 6 walls)
 _JUDGED_HEIGHT = 1.4
+# m, longest end wall dropped as a furniture's side a camera saw over (the generator's sofas
+# and beds stand up to 1.05 m out from their wall)
+_MAX_SEEN_SIDE = 1.1
+_SIDE_BAND = 0.15  # m, points this close to an end wall's line are its own (lines stray)
+_SEEN_OVER = 0.3  # m, above a column's tallest point: a wall would have shown there
+_RAY_WIDTH = 0.05  # m, a point this close to a camera's ray blocked it
+_RAY_NEAR, _RAY_FAR = 0.3, 0.2  # m, ray parts not looked at: at the camera, at the wall
 
 
 def _cross(a: FloatArray, b: FloatArray) -> float:
@@ -307,23 +314,42 @@ def _drop_end_reveals(keypoints: FloatArray) -> FloatArray:
 
 
 def _drop_end_sides(
-    keypoints: FloatArray, views: Sequence[CameraView], floor_z: float
+    keypoints: FloatArray, views: Sequence[CameraView], points: FloatArray, floor_z: float
 ) -> FloatArray:
     """The chain without end walls that may be a furniture's side.
 
-    Where a frame's view ends beside a wardrobe or shelf against a wall, the chain can start
-    (or end) on the furniture's side: a wall less than ``MAX_FURNITURE_DEPTH`` long that
-    meets the room's wall at a convex corner (a left turn, interior on the left), as a
-    room's own corner would. Low down the two look the same, so such an end wall is dropped
-    when no camera saw any of its columns up to ``_JUDGED_HEIGHT`` (at a view's bottom
-    corner a camera sees only the lower part of what stands there). A room's corner dropped
-    so loses little: the chain still ends at the corner, and a neighbour sees the wall that
-    turns. The wall left must be longer than the one dropped.
+    Where a frame's view ends beside a wardrobe, shelf or sofa against a wall, the chain can
+    start (or end) on the furniture's side: a short wall that meets the room's wall at a
+    convex corner (a left turn, interior on the left), as a room's own corner would. Such
+    an end wall is dropped
+
+    - when under ``MAX_FURNITURE_DEPTH`` and no camera saw any of its columns up to
+      ``_JUDGED_HEIGHT`` (at a view's bottom corner a camera sees only the lower part of
+      what stands there: low down a wall and a side look the same), or
+    - when under ``_MAX_SEEN_SIDE``, its points stop under ``_JUDGED_HEIGHT`` and a camera
+      facing it saw over it (:func:`_seen_over`): a wall would have shown there.
+
+    A room's corner dropped so loses little: the chain still ends at the corner, and a
+    neighbour sees the wall that turns. The wall left must be longer than the one dropped.
+
+    Parameters
+    ----------
+    keypoints : (K, 2) the chain, interior on its left.
+    views : the cameras that saw the fragment, aligned frame.
+    points : (N, 3) the fragment's points, aligned frame.
+    floor_z : the floor's height, aligned frame.
     """
-    return _drop_ends(
-        keypoints,
-        lambda along, end, wall: _side_like(along, end) and not _seen_high(wall, views, floor_z),
-    )
+
+    def drops(along: FloatArray, end: FloatArray, wall: FloatArray) -> bool:
+        if not _side_like(along, end, _MAX_SEEN_SIDE):
+            return False
+        if float(np.linalg.norm(end)) < MAX_FURNITURE_DEPTH and not _seen_high(
+            wall, views, floor_z
+        ):
+            return True
+        return _seen_over(wall, views, points, floor_z)
+
+    return _drop_ends(keypoints, drops)
 
 
 def _drop_ends(
@@ -341,16 +367,12 @@ def _drop_ends(
     return kp
 
 
-def _side_like(along: FloatArray, end: FloatArray) -> bool:
+def _side_like(along: FloatArray, end: FloatArray, longest: float) -> bool:
     """Whether an end wall (the floor-plan step ``end`` from its corner to its free end) is
-    as short as a furniture's side, shorter than the wall ``along`` it meets (chain order),
-    and stands on the room's side of that wall (its left)."""
+    shorter than ``longest`` and than the wall ``along`` it meets (chain order), and stands
+    on the room's side of that wall (its left)."""
     length = float(np.linalg.norm(end))
-    return (
-        _cross(along, end) > 0
-        and length < MAX_FURNITURE_DEPTH
-        and length < float(np.linalg.norm(along))
-    )
+    return _cross(along, end) > 0 and length < min(longest, float(np.linalg.norm(along)))
 
 
 def _seen_high(wall: FloatArray, views: Sequence[CameraView], floor_z: float) -> bool:
@@ -359,6 +381,53 @@ def _seen_high(wall: FloatArray, views: Sequence[CameraView], floor_z: float) ->
     samples = wall[0] + np.linspace(0.1, 0.9, 5)[:, None] * (wall[1] - wall[0])
     _, high = visible_band(views, samples)
     return bool(np.any(high >= floor_z + _JUDGED_HEIGHT))  # NaN (unseen) compares False
+
+
+def _seen_over(
+    wall: FloatArray, views: Sequence[CameraView], points: FloatArray, floor_z: float
+) -> bool:
+    """Whether a camera facing the wall (2, 2; interior on its left) saw over it where a
+    room's wall would have stood: none of its own points (within ``_SIDE_BAND`` of its line,
+    its ends left out) reaches ``_JUDGED_HEIGHT`` over the floor, and at one of its columns
+    the camera's frustum holds the height ``_SEEN_OVER`` above that column's tallest point,
+    on a ray nothing blocked (a wardrobe before the wall hides it as well as its top)."""
+    step = wall[1] - wall[0]
+    length = float(np.linalg.norm(step))
+    if length == 0.0:
+        return False
+    unit = step / length
+    relative = points[:, :2] - wall[0]
+    along = relative @ unit / length
+    own = np.abs(relative @ np.array([-unit[1], unit[0]])) < _SIDE_BAND
+    middle = own & (along >= 0.1) & (along <= 0.9)
+    if np.any(points[middle, 2] >= floor_z + _JUDGED_HEIGHT):
+        return False
+    fractions = np.linspace(0.1, 0.9, 5)
+    columns = wall[0] + fractions[:, None] * step
+    near = own & (np.abs(along - fractions[:, None]) <= 0.1)  # (5, N) a column's points
+    tops = np.max(np.where(near, points[:, 2], floor_z), axis=1, initial=floor_z)
+    spots = np.column_stack([columns, tops + _SEEN_OVER])
+    for view in views:
+        if _cross(step, view.centre[:2] - wall[0]) <= 0:
+            continue  # behind the wall: it saw the other face, if anything
+        low, high = view.band(columns)
+        framed = (low <= spots[:, 2]) & (spots[:, 2] <= high)
+        if any(_clear_ray(view.centre, spot, points) for spot in spots[framed]):
+            return True
+    return False
+
+
+def _clear_ray(start: FloatArray, end: FloatArray, points: FloatArray) -> bool:
+    """Whether no point lies within ``_RAY_WIDTH`` of the ray from ``start`` to ``end`` (3,)
+    past the camera's own surroundings and short of the end's (the wall's points)."""
+    ray = end - start
+    length = float(np.linalg.norm(ray))
+    unit = ray / length
+    relative = points - start
+    t = relative @ unit
+    between = (t > _RAY_NEAR) & (t < length - _RAY_FAR)
+    off = relative[between] - t[between, None] * unit
+    return not bool(np.any(np.einsum("ij,ij->i", off, off) < _RAY_WIDTH**2))
 
 
 def _without_furniture(keypoints: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
@@ -577,7 +646,7 @@ def estimate_frame_layout(
         )
     kp = _to_frustum_edges(_without_furniture(chain.keypoints, lines), lines, views)
     # An end wall's length is known once it reaches the view's edge.
-    kp = _drop_end_sides(kp, views, frame.floor_z)
+    kp = _drop_end_sides(kp, views, aligned, frame.floor_z)
     if len(kp) == 2 and len(views) == 1:
         around = _wall_around_opening(kp, aligned, normals, frame.floor_z, views[0])
         kp = kp if around is None else around

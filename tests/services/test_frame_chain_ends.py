@@ -185,20 +185,82 @@ def test_an_end_wall_as_short_as_a_furnitures_side_is_dropped_unless_seen_up_hig
     view = CameraView.from_intrinsics(KINECT, LEVEL, np.zeros(3))
     chain = np.array([[3.0, 2.0], [0.0, 2.0], [0.0, 1.6]])
     seen_low, seen_high = -0.3, -1.0
-    np.testing.assert_allclose(_drop_end_sides(chain, [view], seen_low), chain[:2])
-    np.testing.assert_allclose(_drop_end_sides(chain, [view], seen_high), chain)
+    none = np.zeros((0, 3))  # the camera sits on the end wall's line: it faces neither side
+    np.testing.assert_allclose(_drop_end_sides(chain, [view], none, seen_low), chain[:2])
+    np.testing.assert_allclose(_drop_end_sides(chain, [view], none, seen_high), chain)
     # The same at the source end, walked the other way round.
     source = np.array([[0.0, 1.6], [0.0, 2.0], [-3.0, 2.0]])
-    np.testing.assert_allclose(_drop_end_sides(source, [view], seen_low), source[1:])
+    np.testing.assert_allclose(_drop_end_sides(source, [view], none, seen_low), source[1:])
     # Deeper than furniture stands: the room's own.
     deep = np.array([[3.0, 2.0], [0.0, 2.0], [0.0, 1.1]])
-    np.testing.assert_allclose(_drop_end_sides(deep, [view], seen_low), deep)
+    np.testing.assert_allclose(_drop_end_sides(deep, [view], none, seen_low), deep)
     # Of two short walls only the shorter can be a side.
     short = np.array([[0.5, 2.0], [0.0, 2.0], [0.0, 1.6]])
-    np.testing.assert_allclose(_drop_end_sides(short, [view], seen_low), short[:2])
+    np.testing.assert_allclose(_drop_end_sides(short, [view], none, seen_low), short[:2])
     # Turning away from the room is no furniture's side (a reveal: _drop_end_reveals).
     away = np.array([[3.0, 2.0], [0.0, 2.0], [0.0, 2.4]])
-    np.testing.assert_allclose(_drop_end_sides(away, [view], seen_low), away)
+    np.testing.assert_allclose(_drop_end_sides(away, [view], none, seen_low), away)
+
+
+def _face(a: tuple[float, float], b: tuple[float, float], z: tuple[float, float]) -> np.ndarray:
+    """Points 3 cm apart on the upright rectangle over the floor-plan segment a-b."""
+    t, height = np.meshgrid(np.linspace(0.0, 1.0, 40), np.arange(z[0], z[1], 0.03))
+    xy = np.asarray(a) + t.ravel()[:, None] * (np.asarray(b) - np.asarray(a))
+    return np.column_stack([xy, height.ravel()])
+
+
+# Along y = 3 travelling -x (room below), the chain ends on a 0.8 m wall turning into the
+# room at x = -1: a sofa's side (up to 1.05 m deep) or a wall. The level camera at the origin,
+# 1.3 m over the floor, sees its columns from under the floor to over 2.4 m.
+FLOOR = -1.3
+SIDE_CHAIN = np.array([[2.0, 3.0], [-1.0, 3.0], [-1.0, 2.2]])
+ROOM_WALL = _face((2.0, 3.0), (-1.8, 3.0), (FLOOR, FLOOR + 2.5))
+
+
+def _sofa(top: float = FLOOR + 0.8) -> np.ndarray:
+    seat_x, seat_y = np.meshgrid(np.arange(-1.8, -1.0, 0.03), np.arange(2.2, 3.0, 0.03))
+    seat = np.column_stack([seat_x.ravel(), seat_y.ravel(), np.full(seat_x.size, top)])
+    return np.vstack([_face((-1.0, 3.0), (-1.0, 2.2), (FLOOR, top)), seat, ROOM_WALL])
+
+
+def test_an_end_wall_a_facing_camera_saw_over_is_dropped_as_a_furnitures_side() -> None:
+    view = CameraView.from_intrinsics(KINECT, LEVEL, np.zeros(3))
+    np.testing.assert_allclose(_drop_end_sides(SIDE_CHAIN, [view], _sofa(), FLOOR), SIDE_CHAIN[:2])
+    # Deeper than a sofa stands: the room's own.
+    deep = SIDE_CHAIN + np.array([[0.0, 0.0], [0.0, 0.0], [0.0, -0.4]])
+    np.testing.assert_allclose(_drop_end_sides(deep, [view], _sofa(), FLOOR), deep)
+    # A camera behind the side (a notch's wall seen from its far side) never looked over it.
+    behind = CameraView.from_intrinsics(KINECT, LEVEL, np.array([-2.0, 0.0, 0.0]))
+    np.testing.assert_allclose(_drop_end_sides(SIDE_CHAIN, [behind], _sofa(), FLOOR), SIDE_CHAIN)
+
+
+def test_an_end_wall_is_kept_where_it_stands_high_or_the_view_over_it_was_blocked() -> None:
+    view = CameraView.from_intrinsics(KINECT, LEVEL, np.zeros(3))
+    # A wall with a doorway's gap in the middle: the view over that column is clear, but
+    # the wall's points beside it stand higher than any furniture.
+    wall = _face((-1.0, 3.0), (-1.0, 2.2), (FLOOR, FLOOR + 2.5))
+    with_door = np.vstack([wall[(wall[:, 1] < 2.5) | (wall[:, 1] > 2.7)], ROOM_WALL])
+    np.testing.assert_allclose(_drop_end_sides(SIDE_CHAIN, [view], with_door, FLOOR), SIDE_CHAIN)
+    # A wall hidden behind a wardrobe (1.94 m high, 1.5 m from the camera) shows no points,
+    # but no ray reached it either.
+    wardrobe = _face((-1.2, 1.5), (-0.3, 1.5), (FLOOR, FLOOR + 1.94))
+    hidden = np.vstack([wardrobe, ROOM_WALL])
+    np.testing.assert_allclose(_drop_end_sides(SIDE_CHAIN, [view], hidden, FLOOR), SIDE_CHAIN)
+
+
+def test_an_end_wall_seen_up_to_the_views_top_is_not_seen_over() -> None:
+    # A 0.4 m wall whose points stop at 1.38 m over the floor because the view's top does
+    # (at 1.38-1.52 m over these columns): no column was seen 0.3 m over its points.
+    floor = -0.17
+    chain = np.array([[2.0, 3.0], [-1.0, 3.0], [-1.0, 2.6]])
+    view = CameraView.from_intrinsics(KINECT, LEVEL, np.zeros(3))
+    points = np.vstack(
+        [
+            _face((-1.0, 3.0), (-1.0, 2.6), (floor, floor + 1.38)),
+            _face((2.0, 3.0), (-1.0, 3.0), (floor, floor + 1.38)),
+        ]
+    )
+    np.testing.assert_allclose(_drop_end_sides(chain, [view], points, floor), chain)
 
 
 def test_the_cells_a_camera_saw_through_reach_its_wall_but_not_past_a_stray_point() -> None:
