@@ -249,6 +249,8 @@ def _flatten_ends(kp: FloatArray) -> FloatArray:
 
 _PAST_CORNER_MIN = 0.2  # m, least wall evidence past a turn that says the turn was early
 _PAST_CORNER_MAX = 1.0  # m, most (deeper than furniture stands: another wall's evidence)
+_MIN_LEAD = 0.1  # m, least stretch of a wall seen before a lone front's end (not a reveal)
+_SEGMENT_SLACK = 0.05  # m, a segment ending this close to a keypoint holds it
 _MAX_REVEAL = 0.35  # m, longest end wall read as a door's or window's reveal
 # m over the floor: a column seen no higher shows no more of a wall than of a cabinet's,
 # shelf's or wardrobe's side (tune frames, three cameras: of the short end walls seen no
@@ -283,19 +285,73 @@ def _past_corner_fronts(keypoints: FloatArray, lines: Sequence[WallLine]) -> Flo
         return kp
     # (wall A's far end, the corner, F's end), A walked towards the corner: target, source.
     for a, c, e in ((len(kp) - 3, len(kp) - 2, len(kp) - 1), (2, 1, 0)):
-        along, turn = _unit(kp[c] - kp[a]), _unit(kp[e] - kp[c])
-        cross = _cross(along, turn)
-        if (cross if e > c else -cross) < 0.5:
-            continue  # not a left turn in chain order
-        line = _wall_line(lines, *((kp[a], kp[c]) if e > c else (kp[c], kp[a])))
-        if line is None:
-            continue
-        outward = 1 if along[line.axis] > 0 else -1
-        reach = line.high_run_beyond(float(kp[c][line.axis]), outward)
-        if _PAST_CORNER_MIN <= reach <= _PAST_CORNER_MAX:
+        reach = _reach_past_turn(kp, a, c, e, lines)
+        if reach > 0.0:
+            along = _unit(kp[c] - kp[a])
             kp[c] = kp[c] + reach * along
             kp[e] = kp[e] + reach * along
     return kp
+
+
+def _reach_past_turn(kp: FloatArray, a: int, c: int, e: int, lines: Sequence[WallLine]) -> float:
+    """How far wall A (keypoints ``a`` to the corner ``c``) is seen on past the chain's left
+    turn at ``c`` onto the end wall towards ``e``, when that says the turn came early
+    (0.2-1 m: a furniture front's depth); else 0."""
+    along, turn = _unit(kp[c] - kp[a]), _unit(kp[e] - kp[c])
+    cross = _cross(along, turn)
+    if (cross if e > c else -cross) < 0.5:
+        return 0.0  # not a left turn in chain order
+    line = _wall_line(lines, *((kp[a], kp[c]) if e > c else (kp[c], kp[a])))
+    if line is None:
+        return 0.0
+    outward = 1 if along[line.axis] > 0 else -1
+    reach = line.high_run_beyond(float(kp[c][line.axis]), outward)
+    return reach if _PAST_CORNER_MIN <= reach <= _PAST_CORNER_MAX else 0.0
+
+
+def _with_wall_before_front(keypoints: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
+    """A one-wall chain given the stretch of the wall it turned off, when that says the wall
+    is a furniture front before the room's corner.
+
+    A wardrobe in a corner can fill a frame's view but for a strip of the wall A beside
+    it: the chain is then the wardrobe's front F alone, from A's line on. When a segment of
+    A holds the chain's end, goes on at least ``_MIN_LEAD`` before it and A's evidence goes
+    on past it behind F (:func:`_reach_past_turn`), the chain gets that stretch of A as its
+    first (or last) wall, and :func:`_past_corner_fronts` moves the corner. A reveal or
+    wall piece behind the end alone (no segment through the end) adds nothing.
+    """
+    if len(keypoints) != 2:
+        return keypoints
+    heading = _unit(keypoints[1] - keypoints[0])
+    left = np.array([-heading[1], heading[0]])
+    # A walked onto the source (a left turn onto F), or away from the target.
+    for end, direction, before, order in ((0, -left, -1, (0, 1, 2)), (1, left, 1, (2, 1, 0))):
+        corner = keypoints[end]
+        line = _wall_line(lines, corner, corner + direction)
+        if line is None:
+            continue
+        outward = 1 if direction[line.axis] > 0 else -1
+        lead = _segment_run(line, float(corner[line.axis]), before * outward)
+        if lead < _MIN_LEAD:
+            continue
+        point = corner + before * lead * direction
+        candidate = np.vstack([point, keypoints]) if end == 0 else np.vstack([keypoints, point])
+        if _reach_past_turn(candidate, *order, lines) > 0.0:
+            return candidate
+    return keypoints
+
+
+def _segment_run(line: WallLine, run: float, outward: int) -> float:
+    """How far (m) a candidate segment of the line through run coordinate ``run`` goes on
+    from it in direction ``outward`` (+1 or -1); 0 when no segment holds ``run``."""
+    return max(
+        (
+            float(hi - run if outward > 0 else run - lo)
+            for lo, hi in line.segments
+            if lo - _SEGMENT_SLACK <= run <= hi + _SEGMENT_SLACK
+        ),
+        default=0.0,
+    )
 
 
 def _drop_end_reveals(keypoints: FloatArray) -> FloatArray:
@@ -437,7 +493,7 @@ def _without_furniture(keypoints: FloatArray, lines: Sequence[WallLine]) -> Floa
     and reveals dropped; a reveal at an end hides an early turn before it, so the corners
     are looked at again once it is gone.
     """
-    kp = _past_corner_fronts(keypoints, lines)
+    kp = _past_corner_fronts(_with_wall_before_front(keypoints, lines), lines)
     kp = _drop_end_reveals(_flatten_furniture(_flatten_corner_fronts(kp)))
     return _past_corner_fronts(kp, lines)
 

@@ -177,6 +177,36 @@ def test_a_corner_hidden_by_a_wardrobe_is_found_behind_an_openings_reveal() -> N
     )
 
 
+def _seen_along(line: WallLine, lo: float, hi: float) -> WallLine:
+    """The line with high evidence and one candidate segment over runs lo..hi."""
+    runs = line.origin + (np.arange(len(line.high)) + 0.5) * line.cell_size
+    return dataclasses.replace(line, high=(runs > lo) & (runs < hi), segments=np.array([[lo, hi]]))
+
+
+def test_a_lone_front_before_a_corner_gets_the_wall_beside_it_and_the_corner_back() -> None:
+    # A wardrobe against the wall x = 0 fills the view but for a strip of the wall A along
+    # y = 3 (travelled -x, room below) beside it: the chain is the wardrobe's front x = 0.6
+    # alone, from A's line down. A is seen from x = 0.8 on past the front to the corner.
+    chain = np.array([[0.6, 3.0], [0.6, 1.0]])
+    wall = _seen_along(_line(3.0, -1), 0.0, 0.8)
+    np.testing.assert_allclose(
+        _without_furniture(chain, [wall]), [[0.8, 3.0], [0.0, 3.0], [0.0, 1.0]], atol=0.05
+    )
+    # Mirrored: the front ends the chain, A goes on from it (-x) and is seen behind it.
+    mirrored = np.array([[-0.6, 1.0], [-0.6, 3.0]])
+    np.testing.assert_allclose(
+        _without_furniture(mirrored, [_seen_along(_line(3.0, -1), -0.8, 0.0)]),
+        [[0.0, 1.0], [0.0, 3.0], [-0.8, 3.0]],
+        atol=0.05,
+    )
+    # A seen hardly before the front's end (a window's reveal behind the wall the chain is
+    # on), or not past it (the front is a wall: its corner with A is the room's).
+    behind = _seen_along(_line(3.0, -1), 0.0, 0.65)
+    np.testing.assert_allclose(_without_furniture(chain, [behind]), chain)
+    before = _seen_along(_line(3.0, -1), 0.6, 1.5)
+    np.testing.assert_allclose(_without_furniture(chain, [before]), chain)
+
+
 def test_an_end_wall_as_short_as_a_furnitures_side_is_dropped_unless_seen_up_high() -> None:
     # Along y = 2 travelling -x (room below), the chain ends on a 0.4 m wall turning into the
     # room (a left turn): a shelf's side, or a room's corner. The level camera sees that
