@@ -37,6 +37,9 @@ _MIN_BEHIND = 0.5  # m, the shallowest strip a bridge is checked with (one camer
 _BEHIND_RATIO = 0.3  # behind/front occupancy above which a cell is not a boundary
 _MAX_GAP_CELLS = 2  # low cells bridged inside one candidate segment
 _OCCLUSION_REACH = 3.0  # m, longest occluded stretch bridged between parallel walls
+_MAX_ARM_DEPTH = 7.0  # m, longest hidden side of a room's arm bridged (one camera's range)
+_SHADOW_SLACK = 0.3  # m, a wall's end casts its shadow this close to where a wall is seen again
+_MIN_ARM_SIDE = 0.5  # least share of an arm's depth its other side is seen along
 _SUPPORT_POINTS = 3  # interior-strip points that show the line's cell borders scanned space
 # Share of the floor-to-ceiling band a wall column must reach: walls meet the ceiling, a
 # wardrobe stops 0.2-0.5 m short of it (at 0.85 its side became a wall at a scan's end).
@@ -505,37 +508,103 @@ def _occluded_links(
     the camera saw would be a wall line of its own), so the bridge stands at the nearer
     wall's end; and what lies behind it is looked for no deeper than the shorter of the two
     walls' seen runs, so floor seen past a pillar's far side does not count against it.
+    A step deeper than ``_OCCLUSION_REACH`` is bridged only where it closes an arm of the
+    room (:func:`_closes_an_arm`).
     """
     cell = grid.cell
+    longest = _OCCLUSION_REACH if camera is None else _MAX_ARM_DEPTH
     deduced: list[WallLine] = []
     for a in lines:
         for b in lines:
             if a is b or a.axis != b.axis or a.travel != b.travel or a.virtual or b.virtual:
                 continue
-            if not 2 * cell <= abs(a.offset - b.offset) <= _OCCLUSION_REACH:
+            if not 2 * cell <= abs(a.offset - b.offset) <= longest:
                 continue  # a step too small to be a wall, or too long to be hidden
-            if camera is not None:
-                seen = camera[1 - a.axis]
-                a_nearer = abs(a.offset - seen) < abs(b.offset - seen)
             for seg_a in a.segments:
                 end = seg_a[1] if a.travel > 0 else seg_a[0]
                 for seg_b in b.segments:
                     start = seg_b[0] if a.travel > 0 else seg_b[1]
-                    if not -2 * cell <= (start - end) * a.travel <= _OCCLUSION_REACH:
-                        continue
-                    runs: tuple[float, ...] = (end, start)
-                    depth = _FAR_STRIP
-                    if camera is not None:
-                        runs = (end,) if a_nearer else (start,)
-                        shorter = min(seg_a[1] - seg_a[0], seg_b[1] - seg_b[0])
-                        depth = float(np.clip(shorter, _MIN_BEHIND, _FAR_STRIP))
-                    bridges = (_bridge(a, b, run) for run in runs)
-                    deduced.extend(
-                        br
-                        for br in bridges
-                        if _bounds_scan(br, grid, depth) and not _explained(br, lines, cell)
-                    )
+                    if -2 * cell <= (start - end) * a.travel <= _OCCLUSION_REACH:
+                        deduced += _hidden_walls(a, b, seg_a, seg_b, grid, camera, lines)
     return deduced
+
+
+def _hidden_walls(
+    a: WallLine,
+    b: WallLine,
+    seg_a: FloatArray,
+    seg_b: FloatArray,
+    grid: _Grid,
+    camera: FloatArray | None,
+    lines: list[WallLine],
+) -> list[WallLine]:
+    """The bridges of :func:`_occluded_links` from segment ``seg_a`` of line ``a`` over to
+    segment ``seg_b`` of ``b`` (the next along their travel)."""
+    end = seg_a[1] if a.travel > 0 else seg_a[0]
+    start = seg_b[0] if a.travel > 0 else seg_b[1]
+    runs: tuple[float, ...] = (end, start)
+    depth = _FAR_STRIP
+    if camera is not None:
+        seen = camera[1 - a.axis]
+        a_nearer = abs(a.offset - seen) < abs(b.offset - seen)
+        if abs(a.offset - b.offset) > _OCCLUSION_REACH:
+            near, far = (end, a.offset), (start, b.offset)
+            if not a_nearer:
+                near, far = far, near
+            far_seen = seg_b if a_nearer else seg_a
+            if not _closes_an_arm(near, far, far_seen, a.axis, camera, lines):
+                return []
+        runs = (end,) if a_nearer else (start,)
+        shorter = min(seg_a[1] - seg_a[0], seg_b[1] - seg_b[0])
+        depth = float(np.clip(shorter, _MIN_BEHIND, _FAR_STRIP))
+    bridges = (_bridge(a, b, run) for run in runs)
+    return [
+        br
+        for br in bridges
+        if _bounds_scan(br, grid, depth) and not _explained(br, lines, grid.cell)
+    ]
+
+
+def _closes_an_arm(
+    near: tuple[float, float],
+    far: tuple[float, float],
+    far_seen: FloatArray,
+    axis: int,
+    camera: FloatArray,
+    lines: Sequence[WallLine],
+) -> bool:
+    """Whether one camera saw a deep arm of the room past a wall's end, its side hidden.
+
+    A pier or a wing's wall can hide the near side of a deep arm of the room (a camera
+    behind that side's plane never sees it): the camera sees the wall ending, the arm's far
+    wall beyond it from where the end's shadow falls, and the arm's other side. The bridge
+    at the end is that hidden side when the ray from the camera past the end lands within
+    ``_SHADOW_SLACK`` of where the far wall's seen part starts, and a seen wall across
+    meets the far wall's other end and runs at least half the way back to the near wall.
+    Without the last test a long bridge mostly joined walls of another room or across it.
+
+    near, far: (run, offset) of the nearer wall's end and of the far wall's seen start, on
+    lines of ``axis``; far_seen: (2,) the far wall's seen run span; camera: (2,) its
+    position on the floor plan.
+    """
+    camera_run, camera_offset = camera[axis], camera[1 - axis]
+    near_depth, far_depth = near[1] - camera_offset, far[1] - camera_offset
+    if near_depth * far_depth <= 0 or abs(far_depth) <= abs(near_depth):
+        return False  # the far wall is not behind the near one, seen from the camera
+    shadow = camera_run + (near[0] - camera_run) * far_depth / near_depth
+    if abs(shadow - far[0]) > _SHADOW_SLACK:
+        return False
+    other_end = (
+        far_seen[0] if abs(far_seen[0] - far[0]) > abs(far_seen[1] - far[0]) else far_seen[1]
+    )
+    lo, hi = sorted((near[1], far[1]))
+    for side in lines:
+        if side.virtual or side.axis == axis or abs(side.offset - other_end) > _SHADOW_SLACK:
+            continue
+        spans = np.clip(side.segments, lo, hi)
+        if float(np.sum(spans[:, 1] - spans[:, 0])) >= _MIN_ARM_SIDE * (hi - lo):
+            return True
+    return False
 
 
 def _explained(bridge: WallLine, lines: list[WallLine], cell: float) -> bool:

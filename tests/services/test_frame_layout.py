@@ -260,3 +260,20 @@ def test_a_pillar_seen_face_on_with_both_sides_hidden_stays_in_the_chain(
     corners = np.array([[0.0, high], [depth, high], [depth, low], [0.0, low]])
     off = np.linalg.norm(world[:, None, :] - corners[None], axis=2).min(axis=0)
     assert (off < 0.15).all(), np.round(world, 2).tolist()
+
+
+@pytest.mark.parametrize("yaw", [-100.0, -110.0])
+def test_a_deep_arm_whose_near_side_the_camera_cannot_see_is_followed(yaw: float) -> None:
+    # A pier (x 1.32 to 2.66) stands 4.38 m out of the wall y = 0; the camera beside it
+    # looks down the arm on its left. It sees the pier's end, the arm's far wall y = 0
+    # from where the pier's shadow ends, and the arm's other side x = 0, never the pier's
+    # side x = 1.32 (behind its plane). That side, deeper than a plain occlusion bridge
+    # reaches, closes the arm; without it the chain cut straight across the arm's mouth.
+    polygon = [[4.77, 7.44], [0, 7.44], [0, 0], [1.32, 0], [1.32, 4.38], [2.66, 4.38], [2.66, 0]]
+    room = Room.from_polygon(np.array([*polygon, [4.77, 0]], dtype=np.float64), 2.6)
+    frame, pose = render_views(room, Furnishing(), {"f": ((1.58, 5.68, 1.11), yaw, -12.0)})["f"]
+    layout = estimate_rgbd_layout(frame)
+    world = (layout.keypoints_local() @ pose[:3, :3].T + pose[:3, 3])[:, :2]
+    arm = np.array([[0.0, 0.0], [1.32, 0.0], [1.32, 4.38]])
+    off = np.linalg.norm(world[:, None, :] - arm[None], axis=2).min(axis=0)
+    assert (off < 0.1).all(), np.round(world, 2).tolist()

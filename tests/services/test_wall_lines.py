@@ -14,8 +14,11 @@ from services.pipeline import estimate_layout
 from services.synthetic import SceneSpec, generate_scene
 from services.wall_lines import (
     WallLine,
+    _closes_an_arm,
     _doors_closed,
     _Horizon,
+    _make_grid,
+    _occluded_links,
     _runs,
     _shadowed,
     evidence_threshold,
@@ -399,3 +402,65 @@ def test_the_horizon_is_where_the_camera_sees_over_nearer_things() -> None:
     assert seen[0] == pytest.approx(0.8 * 4.0 / 3.0)  # over the cabinet's top
     assert seen[1] == -np.inf  # nothing stands on that bearing
     assert seen[2] == -np.inf  # the cabinet stands against that column: it is no occluder
+
+
+def _side(offset: float, spans: list[list[float]]) -> WallLine:
+    """A seen wall along y (axis 1) at x = ``offset`` over the run spans ``spans``."""
+    return WallLine(
+        axis=1,
+        offset=offset,
+        travel=-1,
+        origin=0.0,
+        cell_size=0.08,
+        high=np.ones(100, dtype=bool),
+        segments=np.array(spans, dtype=np.float64),
+    )
+
+
+def test_a_long_bridge_closes_an_arm_only_behind_the_walls_end_and_beside_its_other_side():
+    # The camera at (1.58, 5.68) sees a pier's end at x = 1.34 on y = 4.38 and the arm's far
+    # wall y = 0 from x = 0.39 (where the end's shadow falls, 0.53) to x = 0, where the
+    # arm's other side x = 0 meets it and is seen back up most of the way.
+    camera = np.array([1.58, 5.68])
+    near, far, far_seen = (1.34, 4.38), (0.39, 0.0), np.array([0.0, 0.39])
+    side = _side(0.0, [[0.0, 1.92], [2.56, 3.12], [4.08, 4.48]])
+    assert _closes_an_arm(near, far, far_seen, 0, camera, [side])
+    # The far wall seen again well away from the shadow: not what the end hid.
+    assert not _closes_an_arm(near, (1.0, 0.0), np.array([0.0, 1.0]), 0, camera, [side])
+    # No seen side back up the arm (under half its depth, or off the far wall's end).
+    assert not _closes_an_arm(near, far, far_seen, 0, camera, [_side(0.0, [[0.0, 1.5]])])
+    assert not _closes_an_arm(near, far, far_seen, 0, camera, [_side(-0.5, [[0.0, 4.4]])])
+    # The "far" wall in front of the near one, seen from the camera (the ray past its end
+    # lands on the pier's top, and a wall runs up from the top's other end).
+    upright = _side(2.0, [[0.0, 4.4]])
+    assert not _closes_an_arm(far, near, np.array([1.34, 2.0]), 0, camera, [side, upright])
+
+
+def test_a_bridge_deeper_than_an_occlusion_is_only_made_across_an_arm():
+    # As above, through _occluded_links: the arm's floor seen, nothing behind the pier.
+    rng = np.random.default_rng(5)
+    floor = np.column_stack([rng.uniform(0.0, 1.3, 4000), rng.uniform(0.0, 7.4, 4000)])
+    room = np.column_stack([rng.uniform(0.0, 4.7, 4000), rng.uniform(4.5, 7.4, 4000)])
+    xy = np.vstack([floor, room])
+    grid = _make_grid(xy, 0.08, np.ones(len(xy), dtype=bool))
+
+    def wall(offset: float, span: list[float]) -> WallLine:
+        return WallLine(
+            axis=0,
+            offset=offset,
+            travel=1,
+            origin=-1.0,
+            cell_size=0.08,
+            high=np.ones(100, dtype=bool),
+            segments=np.array([span]),
+        )
+
+    walls = [wall(0.0, [0.0, 0.39]), wall(4.38, [1.34, 1.82])]
+    camera = np.array([1.58, 5.68])
+
+    def hidden_sides(lines: list[WallLine]) -> list[float]:
+        return [ln.offset for ln in _occluded_links(lines, grid, camera) if ln.axis == 1]
+
+    side = _side(0.0, [[0.0, 1.92], [2.56, 3.12], [4.08, 4.48]])
+    assert hidden_sides([*walls, side]) == pytest.approx([1.34])
+    assert hidden_sides(walls) == []
