@@ -525,23 +525,26 @@ def _occluded_links(
                 for seg_b in b.segments:
                     start = seg_b[0] if a.travel > 0 else seg_b[1]
                     if -2 * cell <= (start - end) * a.travel <= _OCCLUSION_REACH:
-                        deduced += _hidden_walls(a, b, seg_a, seg_b, grid, camera, lines)
+                        deduced += _hidden_walls(
+                            a, b, (seg_a, seg_b), (end, start), grid, camera, lines
+                        )
     return deduced
 
 
 def _hidden_walls(
     a: WallLine,
     b: WallLine,
-    seg_a: FloatArray,
-    seg_b: FloatArray,
+    segments: tuple[FloatArray, FloatArray],
+    gap: tuple[float, float],
     grid: _Grid,
     camera: FloatArray | None,
     lines: list[WallLine],
 ) -> list[WallLine]:
-    """The bridges of :func:`_occluded_links` from segment ``seg_a`` of line ``a`` over to
-    segment ``seg_b`` of ``b`` (the next along their travel)."""
-    end = seg_a[1] if a.travel > 0 else seg_a[0]
-    start = seg_b[0] if a.travel > 0 else seg_b[1]
+    """The bridges of :func:`_occluded_links` from a segment of line ``a`` over to the next
+    segment of ``b`` along their travel (``segments``: the two, ``gap``: the run where the
+    first ends and the second starts)."""
+    seg_a, seg_b = segments
+    end, start = gap
     runs: tuple[float, ...] = (end, start)
     depth = _FAR_STRIP
     if camera is not None:

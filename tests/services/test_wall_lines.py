@@ -404,17 +404,24 @@ def test_the_horizon_is_where_the_camera_sees_over_nearer_things() -> None:
     assert seen[2] == -np.inf  # the cabinet stands against that column: it is no occluder
 
 
-def _side(offset: float, spans: list[list[float]]) -> WallLine:
-    """A seen wall along y (axis 1) at x = ``offset`` over the run spans ``spans``."""
+def _seen_line(
+    axis: int, offset: float, travel: int, spans: list[list[float]], origin: float = 0.0
+) -> WallLine:
+    """A wall line seen high all along, its candidate segments over the run spans ``spans``."""
     return WallLine(
-        axis=1,
+        axis=axis,
         offset=offset,
-        travel=-1,
-        origin=0.0,
+        travel=travel,
+        origin=origin,
         cell_size=0.08,
         high=np.ones(100, dtype=bool),
         segments=np.array(spans, dtype=np.float64),
     )
+
+
+def _side(offset: float, spans: list[list[float]]) -> WallLine:
+    """A seen wall along y (axis 1) at x = ``offset`` over the run spans ``spans``."""
+    return _seen_line(1, offset, -1, spans)
 
 
 def test_a_long_bridge_closes_an_arm_only_behind_the_walls_end_and_beside_its_other_side():
@@ -444,18 +451,10 @@ def test_a_bridge_deeper_than_an_occlusion_is_only_made_across_an_arm():
     xy = np.vstack([floor, room])
     grid = _make_grid(xy, 0.08, np.ones(len(xy), dtype=bool))
 
-    def wall(offset: float, span: list[float]) -> WallLine:
-        return WallLine(
-            axis=0,
-            offset=offset,
-            travel=1,
-            origin=-1.0,
-            cell_size=0.08,
-            high=np.ones(100, dtype=bool),
-            segments=np.array([span]),
-        )
-
-    walls = [wall(0.0, [0.0, 0.39]), wall(4.38, [1.34, 1.82])]
+    walls = [
+        _seen_line(0, 0.0, 1, [[0.0, 0.39]], -1.0),
+        _seen_line(0, 4.38, 1, [[1.34, 1.82]], -1.0),
+    ]
     camera = np.array([1.58, 5.68])
 
     def hidden_sides(lines: list[WallLine]) -> list[float]:
