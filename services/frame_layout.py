@@ -36,6 +36,7 @@ from services.wall_graph import find_wall_chain
 from services.wall_lines import (
     MAX_DOORWAY,
     MAX_FURNITURE_DEPTH,
+    MAX_WALL_THICKNESS,
     WallLine,
     find_wall_lines,
     offset_peaks,
@@ -54,7 +55,6 @@ _LEVEL_BIN = 0.02  # m, height histogram bin of the floor search
 _UPRIGHT_SIN = 0.2  # a normal this far from horizontal at most: a standing surface
 _FACING_COS = 0.9  # a standing surface's normal this close to a wall's normal faces like it
 _MIN_OPENING_COVER = 0.25  # least share of the view a wall with an opening fills
-_MAX_WALL_THICKNESS = 0.3  # m, deepest top or side of a wall's opening (furniture is deeper)
 _MIN_SURFACE_POINTS = 30  # fewer points than this make no surface (a tenth: no top or side)
 _NEAR_CAMERA = 0.3  # m, standing surfaces closer to the camera are not looked at
 _COLUMN_DEGREES = 2.0  # bin of the view's columns a surface shows up in
@@ -618,7 +618,7 @@ def _wall_around_opening(
     sides = behind & (np.abs(normals[:, axis]) > _FACING_COS)
     for part in (top, sides):
         deep = np.count_nonzero(part) >= _MIN_SURFACE_POINTS // 3 and (
-            np.percentile(depth[part], 95) - offset > _MAX_WALL_THICKNESS
+            np.percentile(depth[part], 95) - offset > MAX_WALL_THICKNESS
         )
         if deep:
             return None

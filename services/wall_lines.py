@@ -25,13 +25,22 @@ from schemas.params import LayoutParams
 from services.frustum import CameraView, visible_band
 from services.types import FloatArray
 
-__all__ = ["MAX_DOORWAY", "WallLine", "evidence_threshold", "find_wall_lines", "scan_top"]
+__all__ = [
+    "MAX_DOORWAY",
+    "MAX_FURNITURE_DEPTH",
+    "MAX_WALL_THICKNESS",
+    "WallLine",
+    "evidence_threshold",
+    "find_wall_lines",
+    "scan_top",
+]
 
 _HIST_BIN = 0.01  # m, offset histogram resolution
 _LINE_TOLERANCE = 0.05  # m, wall points kept around a line offset
 _MERGE_DISTANCE = 0.15  # m, parallel peaks closer than this are one wall
 _NEAR_STRIP = 0.12  # m, the strips skip the wall's own noisy band
 MAX_FURNITURE_DEPTH = 0.75  # m, deepest step into the room read as a furniture front
+MAX_WALL_THICKNESS = 0.3  # m, deepest top or side of a wall's opening (furniture is deeper)
 _FAR_STRIP = 1.0  # m, depth of the strips in front of and behind a wall
 _MIN_BEHIND = 0.5  # m, the shallowest strip a bridge is checked with (one camera)
 _BEHIND_RATIO = 0.3  # behind/front occupancy above which a cell is not a boundary
@@ -737,9 +746,11 @@ def _facing_cameras(
     and no nearer wall stands between it and them (a wall seen through a door or window of
     a nearer one is the next room's). Cells seen through a nearer line's wall points (at any
     height: a window leaves wall below and above it) or through a door in it
-    (:func:`_doors_closed`; not when the nearer line stands less than
-    ``MAX_FURNITURE_DEPTH`` before the wall: the gap between two furniture fronts shows the
-    wall behind them) lose their evidence. Cells in a nearer wall's shadow
+    (:func:`_doors_closed`) lose their evidence. A nearer line less than
+    ``MAX_FURNITURE_DEPTH`` before the wall hides it only by its own points when within a
+    wall's thickness of it (``MAX_WALL_THICKNESS``: an opening's far side), and not at all
+    when deeper: it is a furniture front, and the wall seen over it, beside it or between
+    two fronts (no doorway) is the room's. Cells in a nearer wall's shadow
     (:func:`_shadowed`) are not taken for open space, whatever lies in front of them."""
     centre = np.mean([view.centre[:2] for view in views], axis=0)
     facing = _turned_to_camera(lines, centre)
@@ -756,10 +767,10 @@ def _facing_cameras(
             if not 0.0 < ratio < 1.0 - _NEAR_STRIP:
                 continue
             depth = far.offset - near.offset
+            if MAX_WALL_THICKNESS <= abs(depth) < MAX_FURNITURE_DEPTH:
+                continue  # a furniture front: the wall was seen over or beside it
             if abs(depth) < MAX_FURNITURE_DEPTH:
-                # Fronts of furniture standing before the wall: the gap between two of
-                # them shows the wall, it is no doorway of theirs.
-                occupied = near.occupied
+                occupied = near.occupied  # within the wall's thickness: its own points
             else:
                 away = float(np.sign(depth))
                 if (n, away) not in closed:

@@ -277,3 +277,20 @@ def test_a_deep_arm_whose_near_side_the_camera_cannot_see_is_followed(yaw: float
     arm = np.array([[0.0, 0.0], [1.32, 0.0], [1.32, 4.38]])
     off = np.linalg.norm(world[:, None, :] - arm[None], axis=2).min(axis=0)
     assert (off < 0.1).all(), np.round(world, 2).tolist()
+
+
+@pytest.mark.parametrize(
+    ("x", "y", "yaw", "pitch"), [(3.05, 2.7, 18.0, -8.0), (3.0, 2.6, 20.0, -5.0)]
+)
+def test_the_wall_seen_just_past_a_wardrobes_end_is_the_frames_wall(
+    x: float, y: float, yaw: float, pitch: float
+) -> None:
+    # A wardrobe 0.37 m deep (front x = 3.87) fills most of the view of the wall x = 4.27;
+    # past its end the camera sees a strip of the wall behind it, on rays that cross the
+    # front's line just beside the wardrobe. Deeper than a wall is thick, the front has no
+    # opening to see through: the strip is the room's wall, and the chain runs along it.
+    room = Room.from_polygon(np.array([[0.0, 0], [4.27, 0], [4.27, 4.14], [0, 4.14]]), 2.57)
+    wardrobe = Box(np.array([3.87, 2.24, 0.0]), np.array([4.24, 3.55, 2.06]))
+    world = _world_chain(room, Furnishing(boxes=(wardrobe,)), ((x, y, 1.45), yaw, pitch))
+    np.testing.assert_allclose(world[:, 0], 4.27, atol=0.05)
+    assert world[:, 1].max() > 4.0  # up to the view's edge past the wardrobe
