@@ -46,6 +46,7 @@ _MIN_BEHIND = 0.5  # m, the shallowest strip a bridge is checked with (one camer
 _BEHIND_RATIO = 0.3  # behind/front occupancy above which a cell is not a boundary
 _MAX_GAP_CELLS = 2  # low cells bridged inside one candidate segment
 _OCCLUSION_REACH = 3.0  # m, longest occluded stretch bridged between parallel walls
+_ONE_CAMERA_REACH = 3.5  # m, the same for one camera (a step's side it saw edge-on)
 _MAX_ARM_DEPTH = 7.0  # m, longest hidden side of a room's arm bridged (one camera's range)
 _SHADOW_SLACK = 0.3  # m, a wall's end casts its shadow this close to where a wall is seen again
 _MIN_ARM_SIDE = 0.5  # least share of an arm's depth its other side is seen along
@@ -517,11 +518,12 @@ def _occluded_links(
     the camera saw would be a wall line of its own), so the bridge stands at the nearer
     wall's end; and what lies behind it is looked for no deeper than the shorter of the two
     walls' seen runs, so floor seen past a pillar's far side does not count against it.
-    A step deeper than ``_OCCLUSION_REACH`` is bridged only where it closes an arm of the
+    A step deeper than ``_ONE_CAMERA_REACH`` is bridged only where it closes an arm of the
     room (:func:`_closes_an_arm`).
     """
     cell = grid.cell
     longest = _OCCLUSION_REACH if camera is None else _MAX_ARM_DEPTH
+    reach = _OCCLUSION_REACH if camera is None else _ONE_CAMERA_REACH
     deduced: list[WallLine] = []
     for a in lines:
         for b in lines:
@@ -533,7 +535,7 @@ def _occluded_links(
                 end = seg_a[1] if a.travel > 0 else seg_a[0]
                 for seg_b in b.segments:
                     start = seg_b[0] if a.travel > 0 else seg_b[1]
-                    if -2 * cell <= (start - end) * a.travel <= _OCCLUSION_REACH:
+                    if -2 * cell <= (start - end) * a.travel <= reach:
                         deduced += _hidden_walls(
                             a, b, (seg_a, seg_b), (end, start), grid, camera, lines
                         )
@@ -559,7 +561,7 @@ def _hidden_walls(
     if camera is not None:
         seen = camera[1 - a.axis]
         a_nearer = abs(a.offset - seen) < abs(b.offset - seen)
-        if abs(a.offset - b.offset) > _OCCLUSION_REACH:
+        if abs(a.offset - b.offset) > _ONE_CAMERA_REACH:
             near, far = (end, a.offset), (start, b.offset)
             if not a_nearer:
                 near, far = far, near

@@ -294,3 +294,23 @@ def test_the_wall_seen_just_past_a_wardrobes_end_is_the_frames_wall(
     world = _world_chain(room, Furnishing(boxes=(wardrobe,)), ((x, y, 1.45), yaw, pitch))
     np.testing.assert_allclose(world[:, 0], 4.27, atol=0.05)
     assert world[:, 1].max() > 4.0  # up to the view's edge past the wardrobe
+
+
+@pytest.mark.parametrize(
+    ("x", "y", "yaw", "pitch"),
+    [(4.72, 1.52, 114.0, -18.0), (4.72, 1.52, 110.0, -15.0), (4.73, 1.3, 114.0, -15.0)],
+)
+def test_a_notch_side_seen_edge_on_is_bridged_to_the_far_wall(
+    x: float, y: float, yaw: float, pitch: float
+) -> None:
+    # A notch 3.36 m deep (x 2.75 to 4.74, from y = 2.78 to the far wall y = 6.14); the
+    # camera stands in line with its side x = 4.74 and sees it edge-on, the notch's end
+    # y = 2.78 and the far wall from where that side's shadow falls, not the room's other
+    # side x = 6.42. The hidden side, deeper than 3 m, is bridged (3.5 m reach); the chain
+    # used to stop at the notch's end.
+    outline = [[6.42, 6.14], [4.74, 6.14], [4.74, 2.78], [2.75, 2.78], [2.75, 6.14], [0, 6.14]]
+    room = Room.from_polygon(np.array([*outline, [0, 0], [6.42, 0]], dtype=np.float64), 2.68)
+    world = _world_chain(room, Furnishing(), ((x, y, 1.25), yaw, pitch))
+    corners = np.array([[4.74, 6.14], [4.74, 2.78]])
+    off = np.linalg.norm(world[:, None, :] - corners[None], axis=2).min(axis=0)
+    assert (off < 0.1).all(), np.round(world, 2).tolist()
