@@ -768,21 +768,21 @@ def _facing_cameras(
             ratio = (near.offset - c_off) / (far.offset - c_off)
             if not 0.0 < ratio < 1.0 - _NEAR_STRIP:
                 continue
-            depth = far.offset - near.offset
-            if MAX_WALL_THICKNESS <= abs(depth) < MAX_FURNITURE_DEPTH:
-                continue  # a furniture front: the wall was seen over or beside it
-            if abs(depth) < MAX_FURNITURE_DEPTH:
+            depth = abs(far.offset - near.offset)
+            if depth < MAX_WALL_THICKNESS:
                 occupied = near.occupied  # within the wall's thickness: its own points
+            elif depth < MAX_FURNITURE_DEPTH:
+                continue  # a furniture front: the wall was seen over or beside it
             else:
-                away = float(np.sign(depth))
+                away = float(np.sign(far.offset - near.offset))
                 if (n, away) not in closed:
                     closed[n, away] = _doors_closed(near, lines, away)
                 occupied = closed[n, away]
             cell = np.rint((c_run + (run - c_run) * ratio - near.origin) / near.cell_size)
             inside = (cell >= 0) & (cell < len(occupied))
             index = cell[inside].astype(np.int64)
-            # The crossed cell only: a wall seen just past the end of a furniture front
-            # (its neighbour cell) was seen beside it, not through it.
+            # The crossed cell only: a wall seen just past the end of a nearer line (its
+            # neighbour cell) was seen beside it, not through it.
             high[np.flatnonzero(inside)[occupied[index]]] = False
         spans = _runs(high, _MAX_GAP_CELLS, params.min_wall_cells)
         if spans:
