@@ -124,7 +124,7 @@ class PlacementParams(_Frozen):
         3.844, ge=0, description="energy per m² of seen floor the closed room leaves outside"
     )
     frame_weights: tuple[float, ...] | None = Field(
-        (3.028, 0.25, 0.42, 2.72, 3.263, 1.664, 0.401),
+        (2.774, 1.014, 0.61, 4.093, 4.824, 2.648, 0.127),
         min_length=7,
         max_length=7,
         description="the seven weights above (turn, hull, closure, structure, boundary, "
@@ -255,14 +255,14 @@ class PlacementParams(_Frozen):
         "conflict, its hidden corners, search truncated); (0, 1, 0, ...) is the share itself",
     )
     frame_calibration: tuple[float, float] = Field(
-        (-0.755, 0.475),
+        (-0.675, 0.379),
         description="(bias, slope) mapping the main room's calibrated logit z to a + b z when "
         "its pieces are RGB-D frames (a share of the pieces: that share of the change): a "
         "frame's chain is wrong more often than a cloud's (bench/rgbd_frames.py --fit, tune "
         "seeds); (0, 1) leaves frames as clouds",
     )
     frame_view_slope: float = Field(
-        -0.858,
+        -0.061,
         description="change of that logit per radian the frames see across beyond the "
         "kinect's 63 degrees (a wider camera's chains are right more often, but its rooms "
         "reach higher logits still; bench/rgbd_frames.py --fit over several cameras)",
