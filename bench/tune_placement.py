@@ -17,7 +17,8 @@ Prints the fitted values as ``PlacementParams`` fields; copy them into
 ``schemas/params.py``. Run ``python -m bench.tune_placement`` (``--rounds 2`` refits with the
 first round's weights, as the search's candidates depend on them). ``--frames N`` fits the
 weights of RGB-D frame sites instead (``frame_weights``) on N rendered synthetic rooms and N
-rooms of the tune split's shapes (tune seeds from 2000), each frame laid out alone.
+rooms of the tune split's shapes (tune seeds from 2000), each frame laid out alone, seen by
+the kinect or, pooled, by each ``--camera`` given.
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ from services.confidence import CALIBRATION_FEATURES, calibration_features, same
 from services.evaluation import evaluate_result
 from services.placement import PlacementCandidate, evaluate_placement, make_piece, place_pieces
 from services.placement.energy import FEATURES, feature_weights
+from services.synthetic.render import CAMERAS
 
 __all__ = [
     "LIMITS",
@@ -332,10 +334,17 @@ def main(argv: list[str] | None = None) -> int:
         help="fit placement.frame_weights instead, on this many rendered RGB-D frame scenes of "
         "tune seeds (2000 on), as many synthetic rooms as rooms of the tune split's shapes",
     )
+    parser.add_argument(
+        "--camera",
+        action="append",
+        choices=sorted(CAMERAS),
+        help="with --frames: a depth camera whose rooms are pooled in the fit (repeat for "
+        "several; default kinect)",
+    )
     args = parser.parse_args(argv)
     console = Console()
     if args.frames:
-        return _fit_frame_weights(args.frames, args.rounds, console)
+        return _fit_frame_weights(args.frames, args.rounds, console, args.camera or ["kinect"])
     scenes: list[CachedScene] = []
     if args.load is None:
         jobs = scene_jobs("tune", args.per_bucket, args.real, args.cache)
@@ -374,16 +383,20 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _fit_frame_weights(n_scenes: int, rounds: int, console: Console) -> int:
-    """Fit and print ``frame_weights`` on frame scenes (synthetic and tune-split shapes, in
-    two processes). Refit the frames' calibration map with the new weights afterwards
-    (``bench/rgbd_frames.py --fit``): the map depends on them."""
+def _fit_frame_weights(n_scenes: int, rounds: int, console: Console, cameras: list[str]) -> int:
+    """Fit and print ``frame_weights`` on frame scenes seen by each of ``cameras`` (synthetic
+    and tune-split shapes, in two processes), pooled. Refit the frames' calibration map with
+    the new weights afterwards (``bench/rgbd_frames.py --fit``): the map depends on them."""
     from bench.rgbd_frames import cached_scenes, frame_outlines, side_by_side
 
     pipeline = PipelineParams()
-    runs = side_by_side(cached_scenes, n_scenes, _FRAME_SEED, frame_outlines("tune"), pipeline)
-    scenes = [scene for found in runs.values() for scene in found]
-    console.log(f"{len(scenes)} frame scenes")
+    outlines = frame_outlines("tune")
+    scenes = []
+    for camera in cameras:
+        runs = side_by_side(cached_scenes, n_scenes, _FRAME_SEED, outlines, pipeline, camera)
+        seen = [scene for found in runs.values() for scene in found]
+        console.log(f"{camera}: {len(seen)} frame scenes")
+        scenes += seen
     params = pipeline.placement
     pooled: list[SceneCandidates] = []
     for round_ in range(rounds):

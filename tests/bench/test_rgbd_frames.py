@@ -89,3 +89,13 @@ def test_the_frames_weights_are_fitted_on_rendered_rooms(
     assert "round 1: frame_weights = (" in printed
     weights = printed.split("frame_weights = (")[1].split(")")[0].split(",")
     assert len(weights) == 7 and all(float(w) >= 0.0 for w in weights)
+
+
+def test_the_frames_weights_pool_the_rooms_of_every_camera_given(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["--frames", "1", "--rounds", "1", "--camera", "kinect", "--camera", "wide"]) == 0
+    printed = " ".join(capsys.readouterr().out.split())
+    seen = [int(printed.split(f"{camera}: ")[1].split()[0]) for camera in ("kinect", "wide")]
+    fitted_on = int(printed.split("weights before: ")[1].split()[2])  # "N of M": M rooms
+    assert min(seen) >= 1 and fitted_on == sum(seen)
