@@ -473,6 +473,7 @@ def _lines_from_peak(
         else:
             front = crossing
     lines = []
+    occupied = np.bincount(cells, minlength=n_cells) > 0
     for sign, near_side, far_side in ((1, front, behind), (-1, behind, front)):
         high = tall & (far_side <= _BEHIND_RATIO * np.maximum(near_side, 1.0))
         spans = _runs(high, _MAX_GAP_CELLS, params.min_wall_cells)
@@ -486,6 +487,10 @@ def _lines_from_peak(
         seen_through = ~high & (far_side >= _SUPPORT_POINTS)
         if one_camera:
             unsupported &= ~seen_through  # a doorway: crossing_gap bounds it
+        if rule.views:
+            # A frame sees the floor before a wall only where nothing stands against it (a
+            # sofa, a cabinet): the wall's own points over it were scanned all the same.
+            unsupported &= ~occupied
         lines.append(
             WallLine(
                 axis,
@@ -498,7 +503,7 @@ def _lines_from_peak(
                 False,
                 unsupported,
                 seen_through,
-                np.bincount(cells, minlength=n_cells) > 0,
+                occupied,
                 lintel,
             )
         )

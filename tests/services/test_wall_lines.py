@@ -463,3 +463,31 @@ def test_a_bridge_deeper_than_an_occlusion_is_only_made_across_an_arm():
     side = _side(0.0, [[0.0, 1.92], [2.56, 3.12], [4.08, 4.48]])
     assert hidden_sides([*walls, side]) == pytest.approx([1.34])
     assert hidden_sides(walls) == []
+
+
+def test_a_frames_wall_with_its_floor_hidden_is_scanned_where_its_own_points_stand() -> None:
+    # A level camera at the origin looks along +y at a wall at y = 4 (floor at z = -1.2).
+    # In front of its middle (|x| < 0.6) something hides the floor, and of the wall there
+    # only a sill under a window shows (z < -0.5): not a standing wall, but scanned.
+    rng = np.random.default_rng(3)
+    x, z = rng.uniform(-1.5, 1.5, 8000), rng.uniform(-1.2, 1.6, 8000)
+    keep = (np.abs(x) > 0.6) | (z < -0.5)
+    wall = np.column_stack([x[keep], np.full(keep.sum(), 4.0), z[keep]])
+    fx, fy = rng.uniform(-1.5, 1.5, 6000), rng.uniform(1.5, 4.0, 6000)
+    seen = (np.abs(fx) > 0.6) | (fy < 2.5)
+    floor = np.column_stack([fx[seen], fy[seen], np.full(seen.sum(), -1.2)])
+    points = np.vstack([wall, floor])
+    normals = np.vstack(
+        [np.tile([0.0, -1.0, 0.0], (len(wall), 1)), np.tile([0.0, 0.0, 1.0], (len(floor), 1))]
+    )
+    kinect = IntrinsicsModel(width=640, height=480, fx=525, fy=525, cx=319.5, cy=239.5)
+    optical_to_aligned = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])
+    view = CameraView.from_intrinsics(kinect, optical_to_aligned, np.zeros(3))
+
+    def open_gap(views: list[CameraView]) -> float:
+        lines = find_wall_lines(points, normals, -1.2, None, LayoutParams(), views)
+        (line,) = [ln for ln in lines if ln.axis == 0 and abs(ln.offset - 4.0) < 0.05]
+        return line.open_gap(-1.0, 1.0)
+
+    assert open_gap([view]) == 0.0  # the frame's wall may run on across the window
+    assert open_gap([]) > 1.0  # a cloud's rule is unchanged: nothing scanned before it
