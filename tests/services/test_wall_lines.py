@@ -7,11 +7,12 @@ import dataclasses
 import numpy as np
 import pytest
 
-from schemas.frames import IntrinsicsModel
 from schemas.params import LayoutParams
 from services.frustum import CameraView
 from services.pipeline import estimate_layout
+from services.rgbd import OPTICAL_TO_LEVEL
 from services.synthetic import SceneSpec, generate_scene
+from services.synthetic.render import KINECT
 from services.wall_lines import (
     WallLine,
     _closes_an_arm,
@@ -359,6 +360,11 @@ def test_high_cells_are_the_centres_of_runs_long_enough_to_be_walls() -> None:
     assert deduced.high_cells(min_cells=3).shape == (0, 2)
 
 
+def _level_kinect_at_origin() -> CameraView:
+    """A level Kinect-like camera at the origin of the aligned frame, looking along +y."""
+    return CameraView.from_intrinsics(KINECT, OPTICAL_TO_LEVEL, np.zeros(3))
+
+
 def _seen_over_a_cabinet(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """What a level camera at the origin (1.2 m over the floor, looking along +y) sees of a
     2.8 m tall wall at y = 4 with a 2 m tall cabinet at y = 3 in front of its middle: the
@@ -383,9 +389,7 @@ def _seen_over_a_cabinet(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarr
 
 def test_a_wall_seen_only_over_a_cabinet_in_front_of_it_is_still_a_wall() -> None:
     points, normals = _seen_over_a_cabinet(np.random.default_rng(5))
-    kinect = IntrinsicsModel(width=640, height=480, fx=525, fy=525, cx=319.5, cy=239.5)
-    optical_to_aligned = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])
-    view = CameraView.from_intrinsics(kinect, optical_to_aligned, np.zeros(3))
+    view = _level_kinect_at_origin()
     lines = find_wall_lines(points, normals, -1.2, None, LayoutParams(), [view])
     back = [ln for ln in lines if ln.axis == 0 and abs(ln.offset - 4.0) < 0.05 and not ln.virtual]
     assert back, "the wall behind the cabinet is found"
@@ -480,9 +484,7 @@ def test_a_frames_wall_with_its_floor_hidden_is_scanned_where_its_own_points_sta
     normals = np.vstack(
         [np.tile([0.0, -1.0, 0.0], (len(wall), 1)), np.tile([0.0, 0.0, 1.0], (len(floor), 1))]
     )
-    kinect = IntrinsicsModel(width=640, height=480, fx=525, fy=525, cx=319.5, cy=239.5)
-    optical_to_aligned = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])
-    view = CameraView.from_intrinsics(kinect, optical_to_aligned, np.zeros(3))
+    view = _level_kinect_at_origin()
 
     def open_gap(views: list[CameraView]) -> float:
         lines = find_wall_lines(points, normals, -1.2, None, LayoutParams(), views)
