@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from schemas.params import ManhattanParams
+from services.geometry import column_max, column_min
 from services.types import FloatArray, ManhattanFrame
 
 __all__ = [
@@ -101,9 +102,11 @@ def voxel_thin(points: FloatArray, size: float) -> FloatArray:
     """
     if len(points) == 0:
         return np.zeros((0, 3))
-    origin = points.min(axis=0) - 0.5 * size
-    cells = np.floor((points - origin) / size).astype(np.int64)
-    extent = cells.max(axis=0) + 1
+    origin = column_min(points) - 0.5 * size
+    scaled = points - origin
+    scaled /= size
+    cells = np.floor(scaled, out=scaled).astype(np.int64)
+    extent = column_max(cells) + 1
     keys = (cells[:, 0] * extent[1] + cells[:, 1]) * extent[2] + cells[:, 2]
     grid = int(extent[0]) * int(extent[1]) * int(extent[2])
     if grid <= min(_DENSE_GRID, _DENSE_RATIO * len(points)):
@@ -111,7 +114,7 @@ def voxel_thin(points: FloatArray, size: float) -> FloatArray:
         # keys, and gives the same voxels in the same (key) order.
         per_voxel = np.bincount(keys, minlength=grid)
         occupied = per_voxel > 0
-        voxel = (np.cumsum(occupied) - 1)[keys]
+        voxel = np.cumsum(occupied, dtype=np.int32)[keys] - 1  # the grid fits in int32
         counts = per_voxel[occupied]
     else:
         _, voxel, counts = np.unique(keys, return_inverse=True, return_counts=True)

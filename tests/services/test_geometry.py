@@ -1,5 +1,5 @@
 """Polygon helpers: inside test and distance to the boundary, checked against dense sampling;
-grid cells counted as numpy's row-wise unique counts them."""
+grid cells counted as numpy's row-wise unique counts them; column extremes as numpy's."""
 
 from __future__ import annotations
 
@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 from services.geometry import (
+    column_max,
+    column_min,
     distance_to_polygon,
     is_simple_rectilinear,
     points_in_polygon,
@@ -69,3 +71,13 @@ def test_unique_cells_are_numpys_row_wise_unique(span):
 def test_unique_cells_of_nothing_is_empty():
     rows, counts = unique_cells(np.zeros((0, 2), dtype=np.int64))
     assert rows.shape == (0, 2) and counts.shape == (0,)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32, np.int64, np.int32])
+def test_column_extremes_are_numpys_along_the_rows(dtype):
+    rng = np.random.default_rng(7)
+    values = (rng.normal(0.0, 1e3, (10_001, 3)) * rng.uniform(0, 1, (10_001, 1))).astype(dtype)
+    for low, high in [(values, values), (values[::3, :2], values[1::2, 1:])]:
+        assert column_min(low).dtype == dtype and column_max(high).dtype == dtype
+        assert np.array_equal(column_min(low), low.min(axis=0))
+        assert np.array_equal(column_max(high), high.max(axis=0))
