@@ -64,6 +64,14 @@ class FrameParams(BaseModel):
         "about twice the surface of a Kinect's) is thinned with larger voxels, so a 640x480 "
         "frame takes about as long to lay out whatever its lens",
     )
+    max_pitch_deg: float = Field(
+        60.0,
+        gt=0,
+        lt=90,
+        description="steepest camera pitch (or roll) a frame is levelled from: when hardly "
+        "any surface lies within the plane search's tilt limit (manhattan.max_tilt_deg), "
+        "the large plane nearest to level within this angle is taken as floor or ceiling",
+    )
     camera_height: float = Field(
         1.3,
         gt=0,

@@ -29,7 +29,12 @@ from services.frustum import (
 )
 from services.geometry import unique_cells
 from services.local_layout import FOOTPRINT_CELL, boundary_points, footprint_cells
-from services.manhattan import estimate_manhattan_frame, thin_with_normals
+from services.manhattan import (
+    OrientedCloud,
+    estimate_manhattan_frame,
+    steep_floor_tilt,
+    thin_with_normals,
+)
 from services.rgbd import OPTICAL_TO_LEVEL, RgbdFrame, backproject
 from services.types import FloatArray, LocalLayout, ManhattanFrame, ProgressFn
 from services.wall_graph import find_wall_chain
@@ -658,17 +663,22 @@ def estimate_frame_layout(
     cloud = thin_with_normals(
         points @ OPTICAL_TO_LEVEL.T, params.manhattan, params.layout.frame.max_voxels
     )
+    level = OPTICAL_TO_LEVEL
+    steep = steep_floor_tilt(cloud, params.manhattan, params.layout.frame.max_pitch_deg)
+    if steep is not None:  # a camera looking steeply down: level it on the floor first
+        level = steep @ OPTICAL_TO_LEVEL
+        cloud = OrientedCloud(cloud.points @ steep.T, cloud.normals @ steep.T, cloud.spacing)
     # The level frame's up is within the camera's pitch and roll of the truth (well inside
     # the tilt limit), so the plane search that only seeds it can stop at the first planes.
     seed_search = {"max_planes": min(params.manhattan.max_planes, _SEED_PLANES)}
     # The camera's x axis (level x) is about horizontal: cameras pitch, they seldom roll.
     levelled = estimate_manhattan_frame(
-        cloud, params.manhattan.model_copy(update=seed_search), level_axis=np.array([1.0, 0, 0])
+        cloud, params.manhattan.model_copy(update=seed_search), level_axis=level[:, 0]
     )
     aligned = cloud.points @ levelled.rotation.T
     normals = cloud.normals @ levelled.rotation.T
     frame = ManhattanFrame(
-        rotation=levelled.rotation @ OPTICAL_TO_LEVEL,
+        rotation=levelled.rotation @ level,
         floor_z=_floor(aligned, normals, params),
         ceiling_z=levelled.ceiling_z,
         n_planes=levelled.n_planes,

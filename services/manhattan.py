@@ -29,6 +29,7 @@ __all__ = [
     "OrientedCloud",
     "estimate_manhattan_frame",
     "point_spacing",
+    "steep_floor_tilt",
     "thin_with_normals",
     "voxel_thin",
 ]
@@ -46,6 +47,11 @@ _DENSE_RATIO = 16  # ... when they hold at most this many voxels per point
 # frame keeps a third or less, and skips the measurement).
 _SPARSE_SHARE = 0.5
 _RANSAC_CHUNK = 64  # candidate planes scored per matrix product (bounds memory)
+# A frame with fewer normals than this share within the tilt limit of up is searched for a
+# steeper floor, which must hold as many (a steep frame's floor holds a third or more)
+_STEEP_SHARE = 0.1
+_STEEP_CANDIDATES = 200  # normals tried as the floor's direction
+_STEEP_CONE_DEG = 10.0  # normals this close to a candidate support it
 _SHARPEN_POINTS = 12_000  # points used by the fine tilt and yaw search
 _DEGENERATE_GAP = 0.05  # up is ambiguous when its scatter eigenvalue leads by less than this
 _MIN_CEILING_CLEARANCE = 1.8  # m; a horizontal surface lower than this over the floor is furniture
@@ -157,6 +163,47 @@ def _floor_plane_normal(cloud: OrientedCloud, params: ManhattanParams) -> FloatA
             return found
         rest = rest[~inliers]
     return None
+
+
+def steep_floor_tilt(
+    cloud: OrientedCloud, params: ManhattanParams, max_pitch_deg: float
+) -> FloatArray | None:
+    """The smallest rotation taking the floor (or ceiling) to +z, for a camera looking down
+    or up more steeply than ``params.max_tilt_deg``; None for any other view.
+
+    A camera held over a desk or a floor pitches 30-45 degrees: up then lies outside the
+    plane search's tilt limit, and the frame would be levelled on whatever lies inside it.
+    When few normals lie within the limit (under ``_STEEP_SHARE``), the normals within
+    ``max_pitch_deg`` of +z that lean back (a camera looking down sees the floor's normal
+    lean towards it, the facing wall's away) are clustered (10 degree cones around a sample
+    of them): of the directions that hold that share, the one closest to +z is up. A
+    direction within the limit leaves the view to the usual search, exactly as before. The
+    level frame is the camera's (x right, y forward, z up); a camera looking steeply up is
+    not handled.
+    """
+    normals = cloud.normals
+    if len(normals) < 100:
+        return None
+    needed = _STEEP_SHARE * len(normals)
+    if np.count_nonzero(np.abs(normals[:, 2]) > np.cos(np.radians(params.max_tilt_deg))) >= needed:
+        return None
+    oriented = normals * np.where(normals[:, 2:3] < 0, -1.0, 1.0)
+    # Looking down tilts the floor's normal back (-y), the facing wall's forwards (+y).
+    cap = oriented[(oriented[:, 2] > np.cos(np.radians(max_pitch_deg))) & (oriented[:, 1] < 0)]
+    if len(cap) < needed:
+        return None
+    candidates = cap[:: max(1, len(cap) // _STEEP_CANDIDATES)]
+    cone = np.cos(np.radians(_STEEP_CONE_DEG))
+    support = np.count_nonzero(candidates @ cap.T > cone, axis=1)
+    strong = candidates[support >= needed]
+    if not len(strong):
+        return None
+    seed = strong[int(np.argmax(strong[:, 2]))]
+    direction: FloatArray = cap[cap @ seed > cone].mean(axis=0)
+    direction /= np.linalg.norm(direction)
+    if direction[2] > np.cos(np.radians(params.max_tilt_deg)):
+        return None
+    return _minimal_tilt_rotation(direction)
 
 
 def _ransac_plane(

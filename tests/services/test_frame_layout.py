@@ -314,3 +314,21 @@ def test_a_notch_side_seen_edge_on_is_bridged_to_the_far_wall(
     corners = np.array([[4.74, 6.14], [4.74, 2.78]])
     off = np.linalg.norm(world[:, None, :] - corners[None], axis=2).min(axis=0)
     assert (off < 0.1).all(), np.round(world, 2).tolist()
+
+
+@pytest.mark.parametrize(("pitch", "yaw"), [(-35.0, 225.0), (-42.0, 215.0), (-38.0, 235.0)])
+def test_a_camera_looking_steeply_down_is_levelled_on_the_floor(pitch: float, yaw: float) -> None:
+    # Held over a desk, a camera looks 35-42 degrees down, past the plane search's tilt limit
+    # (30 degrees): the frame is levelled on its floor first, and finds the corner it faces.
+    room = Room.from_polygon(np.array([[0.0, 0], [6, 0], [6, 5], [0, 5]]), 2.6)
+    frame, pose = render_views(
+        room, Furnishing(), {"f": ((2.2, 2.0, 1.4), yaw, pitch)}, CAMERAS["realsense"]
+    )["f"]
+    layout = estimate_rgbd_layout(frame)
+    truth_up = pose[:3, :3].T @ np.array([0.0, 0.0, 1.0])
+    assert np.degrees(np.arccos(np.clip(layout.frame.rotation[2] @ truth_up, -1, 1))) < 1.0
+    assert layout.ok
+    world = (layout.keypoints_local() @ pose[:3, :3].T + pose[:3, 3])[:, :2]
+    corner = int(np.argmin(np.linalg.norm(world, axis=1)))
+    np.testing.assert_allclose(world[corner], [0.0, 0.0], atol=0.1)
+    assert 0 < corner < len(world) - 1  # the chain runs along both walls

@@ -9,8 +9,10 @@ import pytest
 from schemas.params import ManhattanParams
 from services import manhattan
 from services.manhattan import (
+    OrientedCloud,
     estimate_manhattan_frame,
     point_spacing,
+    steep_floor_tilt,
     thin_with_normals,
     voxel_thin,
 )
@@ -179,3 +181,34 @@ def test_point_spacing_is_the_median_nearest_neighbour_distance():
     grid = np.stack(np.meshgrid(np.arange(30), np.arange(20), [0.0]), axis=-1).reshape(-1, 3)
     assert point_spacing(0.07 * grid) == pytest.approx(0.07)
     assert point_spacing(np.zeros((1, 3))) == 0.0
+
+
+def _steep_view(floor_share: float, pitch_deg: float) -> OrientedCloud:
+    """Normals of a camera's view (its level frame: x right, y forward, z up) pitched down
+    by ``pitch_deg``: floor, the wall it faces and a side wall, with 2 degrees of noise."""
+    pitch = np.radians(pitch_deg)
+    floor = np.array([0.0, -np.sin(pitch), np.cos(pitch)])  # leans back, towards the camera
+    facing = np.array([0.0, -np.cos(pitch), -np.sin(pitch)])  # faces the camera
+    n = 2000
+    counts = [int(floor_share * n), int(0.6 * n), n - int(floor_share * n) - int(0.6 * n)]
+    rng = np.random.default_rng(1)
+    directions = np.repeat([floor, facing, [1.0, 0.0, 0.0]], counts, axis=0)
+    normals = directions + rng.normal(0.0, np.radians(2.0), directions.shape)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    return OrientedCloud(rng.normal(0.0, 1.0, (n, 3)), normals)
+
+
+@pytest.mark.parametrize("pitch", [35.0, 42.0])
+def test_a_view_pitched_past_the_tilt_limit_is_levelled_on_its_floor(pitch):
+    tilt = steep_floor_tilt(_steep_view(0.3, pitch), ManhattanParams(), 60.0)
+    assert tilt is not None
+    floor = np.array([0.0, -np.sin(np.radians(pitch)), np.cos(np.radians(pitch))])
+    assert np.degrees(np.arccos((tilt @ floor)[2])) < 1.0
+
+
+@pytest.mark.parametrize(("floor_share", "pitch"), [(0.3, 20.0), (0.05, 33.0), (0.3, 70.0)])
+def test_other_views_are_left_to_the_usual_search(floor_share, pitch):
+    # A floor within the tilt limit; a floor too small to find, where the wall the camera
+    # faces (leaning forwards, 57 degrees from level up) must not be taken for it; a floor
+    # past the steepest pitch levelled.
+    assert steep_floor_tilt(_steep_view(floor_share, pitch), ManhattanParams(), 60.0) is None
