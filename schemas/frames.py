@@ -68,9 +68,10 @@ class FrameParams(BaseModel):
         60.0,
         gt=0,
         lt=90,
-        description="steepest camera pitch (or roll) a frame is levelled from: when hardly "
-        "any surface lies within the plane search's tilt limit (manhattan.max_tilt_deg), "
-        "the large plane nearest to level within this angle is taken as floor or ceiling",
+        description="steepest downward look a frame is levelled from: when under a tenth "
+        "of its normals lie within the plane search's tilt limit (manhattan.max_tilt_deg), "
+        "the well-supported normal direction within this angle of level up that leans back "
+        "towards the camera, nearest to level up, is taken as the floor's",
     )
     camera_height: float = Field(
         1.3,

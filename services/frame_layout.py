@@ -671,7 +671,7 @@ def estimate_frame_layout(
     # The level frame's up is within the camera's pitch and roll of the truth (well inside
     # the tilt limit), so the plane search that only seeds it can stop at the first planes.
     seed_search = {"max_planes": min(params.manhattan.max_planes, _SEED_PLANES)}
-    # The camera's x axis (level x) is about horizontal: cameras pitch, they seldom roll.
+    # The camera's x axis is about horizontal: cameras pitch, they seldom roll.
     levelled = estimate_manhattan_frame(
         cloud, params.manhattan.model_copy(update=seed_search), level_axis=level[:, 0]
     )

@@ -168,8 +168,8 @@ def _floor_plane_normal(cloud: OrientedCloud, params: ManhattanParams) -> FloatA
 def steep_floor_tilt(
     cloud: OrientedCloud, params: ManhattanParams, max_pitch_deg: float
 ) -> FloatArray | None:
-    """The smallest rotation taking the floor (or ceiling) to +z, for a camera looking down
-    or up more steeply than ``params.max_tilt_deg``; None for any other view.
+    """The smallest rotation taking the floor to +z, for a camera looking down more steeply
+    than ``params.max_tilt_deg`` (in its level frame); None for any other view.
 
     A camera held over a desk or a floor pitches 30-45 degrees: up then lies outside the
     plane search's tilt limit, and the frame would be levelled on whatever lies inside it.
