@@ -20,6 +20,10 @@ to a busy machine).
 in turn (``--fit`` pools them and also fits the map's change with the view angle,
 ``frame_view_slope``).
 
+``--pitch LOW HIGH`` and ``--roll DEG`` hold the cameras otherwise than the generator does
+(5-20 degrees down, 3 of roll), e.g. ``--pitch -45 -30`` for views over a desk or floor
+(the table only).
+
 ``--shapes`` also runs rooms of real shapes (the MatterportLayout outlines of
 ``../shared/data``: the test split's for held-out seeds, the tune split's for tune seeds)
 when present.
@@ -44,7 +48,7 @@ import math
 import statistics
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -97,11 +101,17 @@ class LayoutClock:
 
 
 def _scenes(
-    n_scenes: int, first_seed: int, outlines: list[FloatArray] | None, camera: str = "kinect"
+    n_scenes: int,
+    first_seed: int,
+    outlines: list[FloatArray] | None,
+    camera: str = "kinect",
+    stance: Mapping[str, Any] | None = None,
 ) -> Iterator[FrameScene | None]:
     """The frame scenes of seeds ``first_seed`` on (rooms of ``outlines`` in turn, if any),
-    seen by one of ``CAMERAS``; None for a room no station tiles within the camera's range."""
-    spec = FrameSpec(intrinsics=CAMERAS[camera])
+    seen by one of ``CAMERAS`` held as ``stance`` says (``FrameSpec`` fields such as
+    ``pitch_deg``, ``roll_deg``; the generator's otherwise); None for a room no station
+    tiles within the camera's range."""
+    spec = FrameSpec(intrinsics=CAMERAS[camera], **(stance or {}))
     for k in range(n_scenes):
         outline = outlines[k % len(outlines)] if outlines else None
         try:
@@ -116,10 +126,12 @@ def run(
     outlines: list[FloatArray] | None = None,
     params: PipelineParams = PipelineParams(),
     camera: str = "kinect",
+    stance: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Local and global figures over ``n_scenes`` frame scenes from ``first_seed``, seen by
-    ``CAMERAS[camera]``; ``"confidences"``, ``"right"`` and ``"views"`` list each main
-    room's confidence, verdict and its frames' view beyond the kinect's
+    ``CAMERAS[camera]`` (held as ``stance`` says, :func:`_scenes`); ``"confidences"``,
+    ``"right"`` and ``"views"`` list each main room's confidence, verdict and its frames'
+    view beyond the kinect's
     (:func:`services.confidence.view_beyond_kinect`, radians); ``"buckets"`` maps a
     frame-count bucket ("4-5") to its rooms' ``[right, said closed, closed and right, rooms]``."""
     local, global_ok, rotation, translation, frames, statuses = [], [], [], [], [], []
@@ -129,7 +141,7 @@ def run(
     clock = LayoutClock()
     buckets: dict[str, list[int]] = {}
     skipped = 0
-    for scene in _scenes(n_scenes, first_seed, outlines, camera):
+    for scene in _scenes(n_scenes, first_seed, outlines, camera, stance):
         if scene is None:
             skipped += 1
             continue
@@ -238,10 +250,25 @@ def main() -> None:
         action="append",
         help="the depth camera rendered (repeat for several; --fit pools them; default kinect)",
     )
+    parser.add_argument(
+        "--pitch",
+        type=float,
+        nargs=2,
+        metavar=("LOW", "HIGH"),
+        help="the cameras' pitch range, degrees (negative: down; the generator's: -20 -5)",
+    )
+    parser.add_argument("--roll", type=float, help="the cameras' largest roll, degrees (3)")
     add_params_option(parser)
     args = parser.parse_args()
     params = params_with(args.set)
     cameras = args.camera or ["kinect"]
+    stance: dict[str, Any] = {}
+    if args.pitch:
+        stance["pitch_deg"] = tuple(args.pitch)
+    if args.roll is not None:
+        stance["roll_deg"] = args.roll
+    if stance and (args.fit or args.anatomy):
+        parser.error("--pitch and --roll apply to the table only")
     if args.fit:
         _fit(args.scenes, args.seed, args.shapes, params, cameras)
         return
@@ -249,25 +276,34 @@ def main() -> None:
         if args.anatomy:
             _anatomy(args.scenes, args.seed, args.shapes, params, camera)
         else:
-            _table(args.scenes, args.seed, args.shapes, params, camera)
+            _table(args.scenes, args.seed, args.shapes, params, camera, stance)
 
 
-def _table(n_scenes: int, first_seed: int, shapes: bool, params: PipelineParams, name: str) -> None:
-    """Print the figures of the frames of one camera, synthetic (and real shapes)."""
+def _table(
+    n_scenes: int,
+    first_seed: int,
+    shapes: bool,
+    params: PipelineParams,
+    name: str,
+    stance: Mapping[str, Any] | None = None,
+) -> None:
+    """Print the figures of the frames of one camera, synthetic (and real shapes), held as
+    ``stance`` says (:func:`_scenes`)."""
     camera = CAMERAS[name]
     across = math.degrees(2 * math.atan(camera.width / (2 * camera.fx)))
-    print(f"camera: {name}, {camera.width}x{camera.height}, {across:.0f} degrees across")
+    held = f", held {dict(stance)}" if stance else ""
+    print(f"camera: {name}, {camera.width}x{camera.height}, {across:.0f} degrees across{held}")
     print(
         "| rooms | scenes | frames | ACC_local % | ACC_global % | rotation deg | "
         "translation % | said closed (right) | ambiguous | ms/frame median (p90) | "
         "CPU ms/frame median (p90) | main rooms: mean confidence / right / Brier |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-    figures = {"synthetic": run(n_scenes, first_seed, None, params, name)}
+    figures = {"synthetic": run(n_scenes, first_seed, None, params, name, stance)}
     print(_row("synthetic", figures["synthetic"]))
     outlines = outlines_for_seeds(first_seed) if shapes else []
     if outlines:
-        shaped = run(n_scenes, first_seed, outlines, params, name)
+        shaped = run(n_scenes, first_seed, outlines, params, name, stance)
         figures["MatterportLayout shapes"] = shaped
         print(_row("MatterportLayout shapes", shaped))
     print("paper (RGB-D and clouds): ACC_global 85.1 %, rotation 8.79 deg, translation 9.15 %")

@@ -74,6 +74,20 @@ def test_the_scenes_are_rendered_by_the_camera_asked_for() -> None:
     assert run(1, 1000, camera="wide")["frames"] == len(wide.frames) != len(kinect.frames)
 
 
+def test_the_scenes_are_rendered_with_the_stance_asked_for() -> None:
+    # The generator's stations look 5-20 degrees down; --pitch asks for steeper views.
+    def pitches(stance: dict[str, object] | None) -> list[float]:
+        [scene] = _scenes(1, 1000, None, "realsense", stance)
+        assert scene is not None
+        forward = [f.pose[:3, 2] for f in scene.frames]  # the optical axis, world
+        return [math.degrees(math.asin(axis[2])) for axis in forward]
+
+    assert all(-20.5 <= p <= -4.5 for p in pitches(None))
+    assert all(-45.5 <= p <= -29.5 for p in pitches({"pitch_deg": (-45.0, -30.0)}))
+    steep = run(1, 1000, camera="realsense", stance={"pitch_deg": (-45.0, -30.0)})
+    assert steep["scenes"] == 1 and 0.0 <= steep["acc_local"] <= 1.0
+
+
 def test_cached_frame_scenes_lay_out_each_frame_alone() -> None:
     [scene] = cached_scenes(1, 1000)
     assert scene.name == "frames-1000" and scene.seed == 1000
