@@ -22,7 +22,8 @@ in turn (``--fit`` pools them and also fits the map's change with the view angle
 
 ``--pitch LOW HIGH`` and ``--roll DEG`` hold the cameras otherwise than the generator does
 (5-20 degrees down, 3 of roll), e.g. ``--pitch -45 -30`` for views over a desk or floor
-(the table only).
+(the table, and ``--fit-view-top``, which fits ``frame_view_top_slope`` on such rooms:
+use tune seeds).
 
 ``--shapes`` also runs rooms of real shapes (the MatterportLayout outlines of
 ``../shared/data``: the test split's for held-out seeds, the tune split's for tune seeds)
@@ -62,13 +63,14 @@ sys.path.insert(0, str(ROOT))  # run as a script, the repository's packages are 
 from bench.scoring import (  # noqa: E402
     add_params_option,
     fit_logit_map,
+    fit_logit_shift,
     main_room_verdict,
     params_with,
 )
 from bench.tune_placement import LIMITS, limit_of, scene_candidates  # noqa: E402
 from bench.world_scenes import BUCKETS, CachedScene, bucket_of  # noqa: E402
 from schemas.params import PipelineParams  # noqa: E402
-from services.confidence import view_beyond_kinect  # noqa: E402
+from services.confidence import view_beyond_kinect, view_top_below_fitted  # noqa: E402
 from services.evaluation import evaluate_result  # noqa: E402
 from services.fragments import fragment_layout  # noqa: E402
 from services.pipeline import align_fragments  # noqa: E402
@@ -130,14 +132,16 @@ def run(
 ) -> dict[str, Any]:
     """Local and global figures over ``n_scenes`` frame scenes from ``first_seed``, seen by
     ``CAMERAS[camera]`` (held as ``stance`` says, :func:`_scenes`); ``"confidences"``,
-    ``"right"`` and ``"views"`` list each main room's confidence, verdict and its frames'
-    view beyond the kinect's
-    (:func:`services.confidence.view_beyond_kinect`, radians); ``"buckets"`` maps a
+    ``"right"``, ``"views"`` and ``"tops"`` list each main room's confidence, verdict, its
+    frames' view beyond the kinect's (:func:`services.confidence.view_beyond_kinect`) and
+    their view's top below the fitted (:func:`~services.confidence.view_top_below_fitted`),
+    radians; ``"buckets"`` maps a
     frame-count bucket ("4-5") to its rooms' ``[right, said closed, closed and right, rooms]``."""
     local, global_ok, rotation, translation, frames, statuses = [], [], [], [], [], []
     confidences: list[float] = []
     right: list[bool] = []
     views: list[float] = []
+    tops: list[float] = []
     clock = LayoutClock()
     buckets: dict[str, list[int]] = {}
     skipped = 0
@@ -155,6 +159,9 @@ def run(
             right.append(verdict[1])
             laid_out = [v for v in aligned.layouts.values() if v.ok]
             views.append(view_beyond_kinect([v.view_angle for v in laid_out if v.view_angle]))
+            tops.append(
+                view_top_below_fitted([v.view_top for v in laid_out if v.view_top is not None])
+            )
         local += list(report.local_correct.values())
         global_ok.append(report.global_correct)
         statuses.append(result["status"])
@@ -188,6 +195,7 @@ def run(
         "confidences": confidences,
         "right": right,
         "views": views,
+        "tops": tops,
         "buckets": buckets,
     }
 
@@ -243,6 +251,11 @@ def main() -> None:
     )
     parser.add_argument("--shapes", action="store_true", help="also real room shapes")
     parser.add_argument("--fit", action="store_true", help="fit the frames' calibration")
+    parser.add_argument(
+        "--fit-view-top",
+        action="store_true",
+        help="fit frame_view_top_slope on rooms seen from --pitch (steeper than the generator)",
+    )
     parser.add_argument("--anatomy", action="store_true", help="what limits each scene")
     parser.add_argument(
         "--camera",
@@ -268,7 +281,12 @@ def main() -> None:
     if args.roll is not None:
         stance["roll_deg"] = args.roll
     if stance and (args.fit or args.anatomy):
-        parser.error("--pitch and --roll apply to the table only")
+        parser.error("--pitch and --roll apply to the table and --fit-view-top only")
+    if args.fit_view_top:
+        if not args.pitch:
+            parser.error("--fit-view-top needs --pitch (views steeper than the fitted)")
+        _fit_view_top(args.scenes, args.seed, params, cameras, stance)
+        return
     if args.fit:
         _fit(args.scenes, args.seed, args.shapes, params, cameras)
         return
@@ -381,6 +399,29 @@ def _fit(
     if len(coefficients) > 2:
         print(f", frame_view_slope = {coefficients[2]}", end="")
     print(f": {summary}")
+
+
+def _fit_view_top(
+    n_scenes: int,
+    first_seed: int,
+    params: PipelineParams,
+    cameras: list[str],
+    stance: Mapping[str, Any],
+) -> None:
+    """Fit and print ``frame_view_top_slope`` on synthetic rooms seen by each of
+    ``cameras`` held as ``stance``, with the rest of the frames' map as it is."""
+    placement = params.placement.model_copy(update={"frame_view_top_slope": 0.0})
+    off = params.model_copy(update={"placement": placement})
+    confidences: list[float] = []
+    right: list[bool] = []
+    tops: list[float] = []
+    for camera in cameras:
+        r = run(n_scenes, first_seed, None, off, camera, stance)
+        confidences += r["confidences"]
+        right += r["right"]
+        tops += r["tops"]
+    slope, summary = fit_logit_shift(confidences, right, tops)
+    print(f"frame_view_top_slope = {slope:.3f}: {summary}")
 
 
 def cached_scenes(

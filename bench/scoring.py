@@ -12,7 +12,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
-from scipy.optimize import minimize
+from scipy.optimize import minimize, minimize_scalar
 
 from schemas.params import PipelineParams, PlacementParams
 from services.evaluation import keypoint_error
@@ -30,6 +30,7 @@ __all__ = [
     "chain_error_in_plan",
     "fit_logistic",
     "fit_logit_map",
+    "fit_logit_shift",
     "main_room_verdict",
     "params_with",
     "share_interval",
@@ -138,6 +139,41 @@ def fit_logit_map(
         f"{float(np.mean((conf - ok) ** 2)):.3f} -> {float(np.mean((mapped - ok) ** 2)):.3f}"
     )
     return tuple(round(float(c), 3) for c in coefficients), summary
+
+
+def fit_logit_shift(
+    confidences: Sequence[float], right: Sequence[bool], extra: Sequence[float]
+) -> tuple[float, str]:
+    """The slope (at most 0) by which ``extra`` (one value per room, 0 where the map was
+    fitted) moves the confidence's logit, the rest of the map kept: the most likely of
+    logit + slope * extra for the rooms' verdicts. Returns it and a line on the rooms with
+    some ``extra`` (their mean confidence and share right, Brier before and after).
+
+    >>> slope, _ = fit_logit_shift([0.8] * 4, [True, False, False, False], [1.0] * 4)
+    >>> round(slope, 2)  # logit(0.25) - logit(0.8)
+    -2.49
+    """
+    conf = np.clip(np.asarray(confidences, dtype=np.float64), 1e-9, 1 - 1e-9)
+    logit = np.log(conf / (1 - conf))
+    ok = np.asarray(right, dtype=np.float64)
+    more = np.asarray(extra, dtype=np.float64)
+
+    def loss(slope: float) -> float:
+        z = logit + slope * more
+        return float(np.sum(np.logaddexp(0.0, z) - ok * z))
+
+    slope = float(minimize_scalar(loss, bounds=(-30.0, 0.0), method="bounded").x)
+    moved = more > 0
+    after = 1.0 / (1.0 + np.exp(-(logit + slope * more)))
+    summary = (
+        f"{int(moved.sum())} of {len(ok)} main rooms beyond the fitted: mean confidence "
+        f"{conf[moved].mean():.2f} -> {after[moved].mean():.2f}, right {ok[moved].mean():.2f}; "
+        f"Brier {float(np.mean((conf[moved] - ok[moved]) ** 2)):.3f} -> "
+        f"{float(np.mean((after[moved] - ok[moved]) ** 2)):.3f}"
+        if moved.any()
+        else f"none of {len(ok)} main rooms beyond the fitted"
+    )
+    return slope, summary
 
 
 def fit_logistic(inputs: np.ndarray, right: np.ndarray, ridge: float = 0.1) -> np.ndarray:

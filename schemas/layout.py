@@ -45,3 +45,8 @@ class LocalLayoutWire(BaseModel):
         description="RGB-D frames: the horizontal angle the cameras see across, radians "
         "(summed over merged frames); null for point clouds",
     )
+    view_top: float | None = Field(
+        None,
+        description="RGB-D frames: how high the top of the view reaches at its middle, "
+        "radians above level (the highest of merged frames); null for point clouds",
+    )

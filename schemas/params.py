@@ -267,6 +267,14 @@ class PlacementParams(_Frozen):
         "kinect's 63 degrees (a wider camera's chains are right more often, but its rooms "
         "reach higher logits still; bench/rgbd_frames.py --fit over several cameras)",
     )
+    frame_view_top_slope: float = Field(
+        -10.9,
+        le=0,
+        description="change of that logit per radian the top of the frames' views lies "
+        "below 4 degrees above level, the lowest the calibration was fitted on (a camera "
+        "looking steeply down sees only its walls' feet; bench/rgbd_frames.py "
+        "--fit-view-top)",
+    )
     thin_cloud_calibration: tuple[float, float] = Field(
         (-0.01, 0.672),
         description="the same map for clouds thinner than layout.min_calibrated_points "

@@ -54,8 +54,12 @@ __all__ = [
     "same_room",
     "same_room_groups",
     "view_beyond_kinect",
+    "view_top_below_fitted",
 ]
 
+# rad: the lowest top of a view the frames' map was fitted on (a kinect, 49 degrees high,
+# looking 20 degrees down: 4.6 degrees above level), less the levelling's error
+_LOWEST_FITTED_TOP = float(np.radians(4.0))
 KINECT_VIEW = 1.094  # rad (63 degrees across): the camera the frames' map was first fitted on
 # rad (119 degrees): the widest view the map's slope was fitted on; wider views (merged
 # frames, panoramas) are taken as this, not extrapolated.
@@ -235,7 +239,23 @@ def _evidence_shift(pieces: Sequence[Piece], z: float, params: PlacementParams) 
         shift += evidence_share(pieces, kind) * (bias + (slope - 1.0) * z)
     views = [p.view_angle for p in pieces if p.evidence == "frame" and p.view_angle is not None]
     wider = view_beyond_kinect(views)
-    return shift + evidence_share(pieces, "frame") * params.frame_view_slope * wider
+    shift += evidence_share(pieces, "frame") * params.frame_view_slope * wider
+    tops = [p.view_top for p in pieces if p.evidence == "frame" and p.view_top is not None]
+    below = view_top_below_fitted(tops)
+    return shift + evidence_share(pieces, "frame") * params.frame_view_top_slope * below
+
+
+def view_top_below_fitted(tops: Sequence[float]) -> float:
+    """What ``frame_view_top_slope`` weighs: how far the top of the frames' views lies below
+    the lowest the frames' calibration was fitted on (radians), averaged over the frames
+    (one frame's wrong chain spoils the room); 0 when none is known.
+
+    >>> round(view_top_below_fitted([np.radians(-16.0), np.radians(30.0)]), 4)
+    0.1745
+    """
+    if not tops:
+        return 0.0
+    return float(np.mean(np.maximum(0.0, _LOWEST_FITTED_TOP - np.asarray(tops))))
 
 
 def view_beyond_kinect(views: Sequence[float]) -> float:

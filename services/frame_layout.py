@@ -634,6 +634,17 @@ def _wall_around_opening(
     return wall
 
 
+def _view_top(cameras: Sequence[FrameCamera], rotation: FloatArray) -> float:
+    """How high the top of the view reaches at its middle column, radians above level: the
+    highest of ``cameras`` (``rotation``: the fragment's local -> aligned)."""
+    tops = []
+    for camera in cameras:
+        k = camera.intrinsics
+        ray = rotation @ camera.pose[:3, :3] @ np.array([0.0, (-0.5 - k.cy) / k.fy, 1.0])
+        tops.append(float(np.arcsin(np.clip(ray[2] / np.linalg.norm(ray), -1.0, 1.0))))
+    return max(tops)
+
+
 def estimate_frame_layout(
     points: FloatArray,
     cameras: Sequence[FrameCamera],
@@ -701,6 +712,7 @@ def estimate_frame_layout(
     cells, _ = unique_cells(np.floor(seen / FOOTPRINT_CELL).astype(np.int64))
     footprint: FloatArray = ((cells + 0.5) * FOOTPRINT_CELL).astype(np.float64)
     across = view_angle(views)
+    top = _view_top(cameras, frame.rotation)
     if chain is None or len(chain.keypoints) < 2:
         report("done", 1.0)
         return LocalLayout(
@@ -709,6 +721,7 @@ def estimate_frame_layout(
             footprint=footprint,
             evidence="frame",
             view_angle=across,
+            view_top=top,
         )
     kp = _to_frustum_edges(_without_furniture(chain.keypoints, lines), lines, views)
     # An end wall's length is known once it reaches the view's edge.
@@ -726,6 +739,7 @@ def estimate_frame_layout(
         footprint=footprint,
         evidence="frame",
         view_angle=across,
+        view_top=top,
     )
 
 

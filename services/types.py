@@ -117,6 +117,9 @@ class LocalLayout:
     view_angle: frames only: the horizontal angle the cameras see across, radians, summed
     over merged frames (None for clouds). A wider view sees more walls, so its chains are
     right more often and its rooms are calibrated by it.
+    view_top: frames only: how high the top of the view reaches at its middle, radians above
+    level (the highest of merged frames; None for clouds). A view whose top lies below
+    level sees only its walls' feet, which furniture shows too.
     """
 
     keypoints: FloatArray
@@ -127,6 +130,7 @@ class LocalLayout:
     evidence: Evidence = "cloud"
     unchained_walls: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     view_angle: float | None = None
+    view_top: float | None = None
 
     @property
     def ok(self) -> bool:
@@ -149,6 +153,7 @@ class LocalLayout:
             footprint=_snap(self.footprint),
             unchained_walls=_snap(self.unchained_walls),
             view_angle=_snap_scalar(self.view_angle, _UNIT_DECIMALS),
+            view_top=_snap_scalar(self.view_top, _UNIT_DECIMALS),
         )
 
     def keypoints_local(self) -> FloatArray:

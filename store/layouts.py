@@ -41,6 +41,7 @@ def layout_to_wire(layout: LocalLayout) -> LocalLayoutWire:
         evidence=layout.evidence,
         unchained_walls=encode_array(layout.unchained_walls),
         view_angle=layout.view_angle,
+        view_top=layout.view_top,
     )
 
 
@@ -61,4 +62,5 @@ def layout_from_wire(wire: LocalLayoutWire) -> LocalLayout:
         evidence=wire.evidence,
         unchained_walls=decode_array(wire.unchained_walls, 2),
         view_angle=wire.view_angle,
+        view_top=wire.view_top,
     )

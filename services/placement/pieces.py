@@ -179,6 +179,7 @@ class Piece:
     ceiling: ceiling height above the floor, or None when the scan saw no ceiling.
     evidence: what the chain rests on (see LocalLayout).
     view_angle: frames only, the horizontal angle their cameras see across (see LocalLayout).
+    view_top: frames only, how high the top of the view reaches (see LocalLayout).
     """
 
     id: str
@@ -191,6 +192,7 @@ class Piece:
     ceiling: float | None = None
     evidence: Evidence = "cloud"
     view_angle: float | None = None
+    view_top: float | None = None
 
     @cached_property
     def turning(self) -> int:
@@ -254,6 +256,7 @@ def make_piece(fragment_id: str, layout: LocalLayout) -> Piece:
         ceiling=None if ceiling is None else float(ceiling - floor),
         evidence=layout.evidence,
         view_angle=layout.view_angle,
+        view_top=layout.view_top,
     )
 
 

@@ -10,6 +10,7 @@ import pytest
 
 from bench.rgbd_frames import (
     LayoutClock,
+    _fit_view_top,
     _row,
     _scenes,
     bucket_row,
@@ -18,6 +19,7 @@ from bench.rgbd_frames import (
     run,
 )
 from bench.tune_placement import LIMITS, main
+from schemas.params import PipelineParams
 from services.synthetic.render import CAMERAS, KINECT
 
 pytestmark = pytest.mark.timeout(180)
@@ -86,6 +88,17 @@ def test_the_scenes_are_rendered_with_the_stance_asked_for() -> None:
     assert all(-45.5 <= p <= -29.5 for p in pitches({"pitch_deg": (-45.0, -30.0)}))
     steep = run(1, 1000, camera="realsense", stance={"pitch_deg": (-45.0, -30.0)})
     assert steep["scenes"] == 1 and 0.0 <= steep["acc_local"] <= 1.0
+    # A realsense 30-45 degrees down sees up to 2-13 degrees below level, 6-17 degrees below
+    # the lowest top of view fitted (4 degrees above level).
+    assert len(steep["tops"]) == len(steep["confidences"])
+    assert all(0.1 < below < 0.32 for below in steep["tops"])
+
+
+def test_the_view_tops_slope_is_fitted_on_rooms_seen_steeply(capsys) -> None:
+    _fit_view_top(1, 2000, PipelineParams(), ["realsense"], {"pitch_deg": (-45.0, -30.0)})
+    line = capsys.readouterr().out
+    assert line.startswith("frame_view_top_slope = ") and "main rooms beyond the fitted" in line
+    assert float(line.split("= ")[1].split(":")[0]) <= 0.0
 
 
 def test_cached_frame_scenes_lay_out_each_frame_alone() -> None:

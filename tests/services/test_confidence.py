@@ -156,6 +156,25 @@ def test_frames_of_a_wider_view_shift_the_logit_by_the_view_slope(l_room):
     assert _main_logit(unknown, placement, params, 2) == pytest.approx(kinect)
 
 
+def test_frames_seeing_less_wall_height_than_fitted_shift_the_logit_by_the_top_slope(l_room):
+    pieces, placement, _ = _ranked(l_room, [1.0, 9.5, 12.5, 20.0])
+    params = GEOMETRY.model_copy(
+        update={"frame_calibration": (-1.0, 0.5), "frame_view_top_slope": -4.0}
+    )
+    level = _main_logit(pieces, placement, params, 2)
+
+    def topped(degrees: list[float | None]) -> list[Piece]:
+        tops = [None if d is None else math.radians(d) for d in degrees]
+        return [dataclasses.replace(p, view_top=t) for p, t in zip(pieces, tops, strict=True)]
+
+    # Views reaching 4 degrees above level or higher are what the map was fitted on.
+    assert _main_logit(topped([4.0, 30.0, None, None]), placement, params, 2) == level
+    # Two frames' views topping out 16 degrees below level and 30 above: 10 degrees below
+    # the fitted on average.
+    steep = _main_logit(topped([-16.0, 30.0, None, None]), placement, params, 2)
+    assert steep == pytest.approx(level + 0.5 * -4.0 * math.radians(10.0))
+
+
 def test_a_doubted_room_makes_its_runners_up_no_likelier_than_itself(l_room):
     pieces, placement, clouds = _ranked(l_room, [1.0, 9.5, 12.5, 20.0])
     frames = [dataclasses.replace(p, evidence="frame") for p in pieces]

@@ -3,6 +3,8 @@ frustum, poses that map the frame's own points; a full-size 640x480 frame."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -13,6 +15,7 @@ from services.frame_layout import estimate_rgbd_layout, frame_points
 from services.frustum import CameraView, in_any_view, view_angle, visible_band
 from services.local_layout import footprint_cells
 from services.pipeline import place_site
+from services.placement.pieces import make_piece
 from services.synthetic.furniture import Box, Furnishing, Opening
 from services.synthetic.render import (
     CAMERAS,
@@ -332,3 +335,17 @@ def test_a_camera_looking_steeply_down_is_levelled_on_the_floor(pitch: float, ya
     corner = int(np.argmin(np.linalg.norm(world, axis=1)))
     np.testing.assert_allclose(world[corner], [0.0, 0.0], atol=0.1)
     assert 0 < corner < len(world) - 1  # the chain runs along both walls
+
+
+@pytest.mark.parametrize("pitch", [-10.0, -38.0])
+def test_a_frames_layout_knows_how_high_its_view_reaches(pitch: float) -> None:
+    # A realsense's view is 2 atan(240 / 385) = 63.9 degrees high: its top lies 31.9 degrees
+    # above where the camera looks.
+    room = Room.from_polygon(np.array([[0.0, 0], [6, 0], [6, 5], [0, 5]]), 2.6)
+    frame, _ = render_views(
+        room, Furnishing(), {"f": ((2.2, 2.0, 1.4), 225.0, pitch)}, CAMERAS["realsense"]
+    )["f"]
+    layout = estimate_rgbd_layout(frame)
+    assert layout.view_top is not None
+    assert math.degrees(layout.view_top) == pytest.approx(pitch + 31.9, abs=1.0)
+    assert make_piece("f", layout).view_top == layout.view_top
