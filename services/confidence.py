@@ -229,7 +229,8 @@ def _evidence_shift(pieces: Sequence[Piece], z: float, params: PlacementParams) 
     calibration's clouds: each kind's map a + b z, in the share of the pieces of that kind.
     With a slope under 1 a map also lifts the lowest confidences a little (below a / (1 - b):
     about 0.11 for frames, 0.03 for thin clouds), as the fit found them. Frames' rooms also
-    move by ``frame_view_slope`` per radian their cameras see across beyond the kinect's."""
+    move by ``frame_view_slope`` per radian their cameras see across beyond the kinect's,
+    and by ``frame_view_top_slope`` per radian their views' tops lie below the fitted."""
     maps: dict[Evidence, tuple[float, float]] = {
         "frame": params.frame_calibration,
         "thin_cloud": params.thin_cloud_calibration,
@@ -237,12 +238,12 @@ def _evidence_shift(pieces: Sequence[Piece], z: float, params: PlacementParams) 
     shift = 0.0
     for kind, (bias, slope) in maps.items():
         shift += evidence_share(pieces, kind) * (bias + (slope - 1.0) * z)
-    views = [p.view_angle for p in pieces if p.evidence == "frame" and p.view_angle is not None]
-    wider = view_beyond_kinect(views)
-    shift += evidence_share(pieces, "frame") * params.frame_view_slope * wider
-    tops = [p.view_top for p in pieces if p.evidence == "frame" and p.view_top is not None]
-    below = view_top_below_fitted(tops)
-    return shift + evidence_share(pieces, "frame") * params.frame_view_top_slope * below
+    frames = [p for p in pieces if p.evidence == "frame"]
+    share = evidence_share(pieces, "frame")
+    wider = view_beyond_kinect([p.view_angle for p in frames if p.view_angle is not None])
+    below = view_top_below_fitted([p.view_top for p in frames if p.view_top is not None])
+    shift += share * params.frame_view_slope * wider
+    return shift + share * params.frame_view_top_slope * below
 
 
 def view_top_below_fitted(tops: Sequence[float]) -> float:
