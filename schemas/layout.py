@@ -17,8 +17,8 @@ Evidence = Literal["cloud", "thin_cloud", "frame"]  # what a local layout rests 
 class LocalLayoutWire(BaseModel):
     """A :class:`services.types.LocalLayout` as versioned JSON.
 
-    Boundary points, the footprint and the unchained walls are base64 little-endian float64
-    arrays ((M, 3), (F, 2) and (W, 2)) in the aligned frame.
+    Boundary points, the footprint, the unchained walls and the cameras are base64
+    little-endian float64 arrays ((M, 3), (F, 2), (W, 2) and (C, 2)) in the aligned frame.
     """
 
     model_config = ConfigDict(frozen=True)
@@ -49,4 +49,10 @@ class LocalLayoutWire(BaseModel):
         None,
         description="RGB-D frames: how high the top of the view reaches at its middle, "
         "radians above level (the highest of merged frames); null for point clouds",
+    )
+    cameras: str | None = Field(
+        None,
+        description="RGB-D frames: (C, 2) base64 aligned-frame positions of the cameras' "
+        "optical centres, one per merged frame; null for point clouds and for layouts "
+        "stored before cameras were kept",
     )

@@ -161,6 +161,24 @@ class PlacementParams(_Frozen):
         description="spread of an overlap or gap along the wall that the two ends' structure "
         "measures (10 cm voxels; median error 3 cm on the benchmark's true junctions), m",
     )
+    station_reach: float = Field(
+        0.6,
+        ge=0,
+        description="RGB-D frames: cameras of two pieces the refined loop puts closer than "
+        "this are taken as one station (a robot turning on the spot, a tripod) and made to "
+        "coincide (stations of one room lie farther apart: at 0.8-1 m the benchmark's "
+        "generator's stations of one room were taken as one and rooms lost); 0 turns it "
+        "off, m",
+    )
+    station_sigma: float = Field(
+        0.05, gt=0, description="how closely the cameras of one station coincide, m"
+    )
+    station_outlier: float = Field(
+        0.25,
+        gt=0,
+        description="cameras taken as one station that the refined loop still leaves farther "
+        "apart are another station's after all (the walls between them say so), m",
+    )
     boundary_band: float = Field(0.10, gt=0, description="paper's boundary band, m")
     boundary_sigma: float = Field(0.10, gt=0, description="sigma of the mismatch CDF, m")
     min_boundary_points: int = Field(50, ge=1)

@@ -713,6 +713,7 @@ def estimate_frame_layout(
     footprint: FloatArray = ((cells + 0.5) * FOOTPRINT_CELL).astype(np.float64)
     across = view_angle(views)
     top = _view_top(cameras, frame.rotation)
+    centres = np.array([view.centre[:2] for view in views], dtype=np.float64)
     if chain is None or len(chain.keypoints) < 2:
         report("done", 1.0)
         return LocalLayout(
@@ -722,6 +723,7 @@ def estimate_frame_layout(
             evidence="frame",
             view_angle=across,
             view_top=top,
+            cameras=centres,
         )
     kp = _to_frustum_edges(_without_furniture(chain.keypoints, lines), lines, views)
     # An end wall's length is known once it reaches the view's edge.
@@ -740,6 +742,7 @@ def estimate_frame_layout(
         evidence="frame",
         view_angle=across,
         view_top=top,
+        cameras=centres,
     )
 
 

@@ -343,6 +343,8 @@ def _diagnostics(
             "status": refined.status,
             "violation_before": refined.violation_before,
             "violation_after": refined.violation_after,
+            # Frames whose cameras were taken as one station and made to coincide.
+            "stations": [[best.order[i], best.order[k]] for i, k in refined.stations],
         },
         "hints_contradicted": contradicted,
     }

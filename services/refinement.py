@@ -12,7 +12,12 @@ disagrees with by far is dropped and the problem solved again. Prior poses from 
 (``Anchor``) add a row per hinted piece against its prior position, in a frame of their own
 that may shift freely (one prior alone says where the room is, not how it is shaped); a
 prior the solution misses by more than three of its standard deviations is dropped the same
-way.
+way. RGB-D frames taken from one station (a robot turning on the spot) share their camera:
+cameras of two pieces that the refined loop puts within ``station_reach`` of each other get a
+row that makes them coincide, and the loop is solved again; a pair the solution still leaves
+``station_outlier`` apart was two stations after all and is dropped. Where the junctions
+leave the pieces free to slide (every junction hiding an unseen stretch), the station is
+what fixes the room's size.
 
 * parallel junction: the two walls are collinear (equal offset) and neither overruns the
   other's far end;
@@ -24,7 +29,8 @@ infeasible or unsolved problem returns a meaningless x.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import itertools
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -76,6 +82,7 @@ class Refinement:
     the two collinear walls simply join; the loop is closed when no constraint is violated.
     strays: per piece (loop order; empty without anchors), whether its prior was dropped as
     one the scans contradict (``stray_anchors``).
+    stations: pairs of pieces (loop indices) whose cameras were made to coincide.
     """
 
     translations: FloatArray
@@ -83,6 +90,23 @@ class Refinement:
     violation_before: float
     violation_after: float
     strays: tuple[bool, ...] = ()
+    stations: tuple[tuple[int, int], ...] = ()
+
+
+@dataclass(frozen=True)
+class _Station:
+    """Two cameras taken as one station: ``first`` of piece i and ``second`` of piece k,
+    (2,) each relative to its piece's source, in the site's orientation."""
+
+    i: int
+    first: FloatArray
+    k: int
+    second: FloatArray
+
+    def apart(self, translations: FloatArray) -> float:
+        """How far apart the two cameras stand with the pieces' sources at ``translations``."""
+        gap = translations[self.i] + self.first - translations[self.k] - self.second
+        return float(np.linalg.norm(gap))
 
 
 @dataclass(frozen=True)
@@ -108,13 +132,16 @@ def _junction_rows(
     noise: JunctionNoise,
     shifts: Sequence[float | None],
     anchors: Sequence[Anchor | None] = (),
+    stations: Sequence[_Station] = (),
+    station_sigma: float = 1.0,
 ) -> _Problem:
     """The QP's rows: each joint's displacement against its model (per axis, weighted by
     its spread; ``shifts[i]`` the measured overlap at straight junction i, if any), walls
     joined in parallel made collinear (a heavily weighted term, within a small slack:
     measured walls never close a loop exactly), the paper's no-overrun and no-crossing
-    inequalities, and with two anchors or more (``anchors[i]`` piece i's, if any) each
-    anchored source against its prior position plus the free offset of the priors' frame."""
+    inequalities, with two anchors or more (``anchors[i]`` piece i's, if any) each
+    anchored source against its prior position plus the free offset of the priors' frame,
+    and each station's two cameras made to coincide (within ``station_sigma``)."""
     n = len(pieces)
     anchored = [(k, a) for k, a in enumerate(anchors) if a is not None]
     if len(anchored) < 2:
@@ -167,6 +194,9 @@ def _junction_rows(
             row[2 * piece + c] = row[2 * n + c] = weight
             j_rows.append(row)
             g_vals.append(float(anchor.position[c] - sites[piece][0][c]) * weight)
+    for row, value in _station_rows(sites, stations, station_sigma, dim):
+        j_rows.append(row)
+        g_vals.append(value)
     gauge = np.zeros((2, dim))
     gauge[0, 0] = gauge[1, 1] = 1.0  # the first piece does not move
     lows = [b[0] for b in bounds] + [0.0, 0.0]
@@ -179,6 +209,22 @@ def _junction_rows(
         hi=np.array(highs),
         ordering=np.array([b[2] for b in bounds] + [False, False], dtype=bool),
     )
+
+
+def _station_rows(
+    sites: list[FloatArray], stations: Sequence[_Station], sigma: float, dim: int
+) -> list[tuple[FloatArray, float]]:
+    """Least-squares rows (row, value) making each station's two cameras coincide within
+    ``sigma``, per coordinate, in the moves of the pieces' sources."""
+    out = []
+    for station in stations:
+        gap = sites[station.i][0] + station.first - sites[station.k][0] - station.second
+        for c in range(2):
+            row = np.zeros(dim)
+            row[2 * station.i + c] = 1.0 / sigma
+            row[2 * station.k + c] = -1.0 / sigma
+            out.append((row, -float(gap[c]) / sigma))
+    return out
 
 
 def _solve(problem: _Problem, keep: NDArray[np.bool_]) -> tuple[str, FloatArray | None]:
@@ -270,11 +316,63 @@ def refine_translations(
     moves = refined.translations - translations
     missed = _missed_shifts(sites, moves, shifts)
     strays = stray_anchors(refined.translations, anchors)
+    kept = [None if miss else shift for shift, miss in zip(shifts, missed, strict=True)]
+    trusted = [None if stray else a for a, stray in zip(anchors, strays, strict=True)]
+
+    def solve(stations: Sequence[_Station] = ()) -> Refinement:
+        # The measurements and priors the first solve kept, and the stations given.
+        return _refine(
+            sites, pieces, rotations, translations, noise, kept, trusted,
+            stations, params.station_sigma,
+        )  # fmt: skip
+
     if any(missed) or any(strays):
-        kept = [None if miss else shift for shift, miss in zip(shifts, missed, strict=True)]
-        trusted = [None if stray else a for a, stray in zip(anchors, strays, strict=True)]
-        refined = _refine(sites, pieces, rotations, translations, noise, kept, trusted)
+        refined = solve()
+    refined = _with_stations(refined, solve, pieces, rotations, params)
     return replace(refined, strays=tuple(strays))
+
+
+def _with_stations(
+    refined: Refinement,
+    solve: Callable[[Sequence[_Station]], Refinement],
+    pieces: Sequence[Piece],
+    rotations: Sequence[int],
+    params: PlacementParams,
+) -> Refinement:
+    """The refinement solved again with the cameras of one station made to coincide: the
+    pairs ``refined`` puts within reach (:func:`_stations`; only those: taking in pairs a
+    first solve brings together chained distinct stations of one room into one), less any
+    the solution still leaves apart, as long as it solves as the loop did without;
+    ``refined`` itself when none is left."""
+    stations = _stations(pieces, rotations, refined.translations, params.station_reach)
+    while stations:
+        solved = solve(stations)
+        if solved.status != refined.status:
+            return refined  # the cameras pull the loop apart: the junctions disagree
+        kept = [s for s in stations if s.apart(solved.translations) <= params.station_outlier]
+        if len(kept) == len(stations):
+            return replace(solved, stations=tuple((s.i, s.k) for s in stations))
+        stations = kept
+    return refined
+
+
+def _stations(
+    pieces: Sequence[Piece], rotations: Sequence[int], translations: FloatArray, reach: float
+) -> list[_Station]:
+    """Pairs of pieces whose nearest cameras stand within ``reach`` of each other with the
+    pieces' sources at ``translations`` (loop order): taken for one station."""
+    cameras = [p.cameras @ rot90(r).T for p, r in zip(pieces, rotations, strict=True)]
+    out = []
+    for i, k in itertools.combinations(range(len(pieces)), 2):
+        if not (len(cameras[i]) and len(cameras[k])):
+            continue
+        first = cameras[i] + translations[i]
+        second = cameras[k] + translations[k]
+        distance = np.linalg.norm(first[:, None, :] - second[None, :, :], axis=2)
+        a, b = np.unravel_index(int(np.argmin(distance)), distance.shape)
+        if distance[a, b] < reach:
+            out.append(_Station(i, cameras[i][a], k, cameras[k][b]))
+    return out
 
 
 def translation_spread(
@@ -397,10 +495,14 @@ def _refine(
     noise: JunctionNoise,
     shifts: Sequence[float | None],
     anchors: Sequence[Anchor | None] = (),
+    stations: Sequence[_Station] = (),
+    station_sigma: float = 1.0,
 ) -> Refinement:
     """One solve of the QP (relaxed, or falling back, as :func:`refine_translations` says)."""
     n = len(pieces)
-    problem = _junction_rows(sites, pieces, rotations, noise, shifts, anchors)
+    problem = _junction_rows(
+        sites, pieces, rotations, noise, shifts, anchors, stations, station_sigma
+    )
     everything = np.ones(len(problem.lo), dtype=bool)
     before = _violation(problem, everything, np.zeros(problem.J.shape[1]))
     status, x = _solve(problem, everything)

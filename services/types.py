@@ -120,6 +120,10 @@ class LocalLayout:
     view_top: frames only: how high the top of the view reaches at its middle, radians above
     level (the highest of merged frames; None for clouds). A view whose top lies below
     level sees only its walls' feet, which furniture shows too.
+    cameras: (C, 2) float64, aligned frame: frames only, where each camera's optical centre
+    stands (one per merged frame; empty for clouds). Frames taken from one station (a robot
+    turning on the spot, a camera on a tripod) share it, which pins how far apart the
+    placement may put their walls.
     """
 
     keypoints: FloatArray
@@ -131,6 +135,7 @@ class LocalLayout:
     unchained_walls: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     view_angle: float | None = None
     view_top: float | None = None
+    cameras: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
 
     @property
     def ok(self) -> bool:
@@ -154,6 +159,7 @@ class LocalLayout:
             unchained_walls=_snap(self.unchained_walls),
             view_angle=_snap_scalar(self.view_angle, _UNIT_DECIMALS),
             view_top=_snap_scalar(self.view_top, _UNIT_DECIMALS),
+            cameras=_snap(self.cameras),
         )
 
     def keypoints_local(self) -> FloatArray:

@@ -42,12 +42,14 @@ def layout_to_wire(layout: LocalLayout) -> LocalLayoutWire:
         unchained_walls=encode_array(layout.unchained_walls),
         view_angle=layout.view_angle,
         view_top=layout.view_top,
+        cameras=encode_array(layout.cameras) if len(layout.cameras) else None,
     )
 
 
 def layout_from_wire(wire: LocalLayoutWire) -> LocalLayout:
     """Inverse of :func:`layout_to_wire`: (K, 2) keypoints, (M, 3) boundaries, (F, 2)
-    footprint, (W, 2) unchained walls, all float64 in the aligned frame."""
+    footprint, (W, 2) unchained walls, (C, 2) cameras (none for a layout stored without),
+    all float64 in the aligned frame."""
     frame = ManhattanFrame(
         rotation=np.asarray(wire.rotation, dtype=np.float64),
         floor_z=wire.floor_z,
@@ -63,4 +65,5 @@ def layout_from_wire(wire: LocalLayoutWire) -> LocalLayout:
         unchained_walls=decode_array(wire.unchained_walls, 2),
         view_angle=wire.view_angle,
         view_top=wire.view_top,
+        cameras=decode_array(wire.cameras or "", 2),
     )

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -180,6 +180,8 @@ class Piece:
     evidence: what the chain rests on (see LocalLayout).
     view_angle: frames only, the horizontal angle their cameras see across (see LocalLayout).
     view_top: frames only, how high the top of the view reaches (see LocalLayout).
+    cameras: (C, 2) float64, frames only: the cameras' optical centres relative to the
+    source (empty for clouds; see LocalLayout).
     """
 
     id: str
@@ -193,6 +195,7 @@ class Piece:
     evidence: Evidence = "cloud"
     view_angle: float | None = None
     view_top: float | None = None
+    cameras: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
 
     @cached_property
     def turning(self) -> int:
@@ -257,6 +260,7 @@ def make_piece(fragment_id: str, layout: LocalLayout) -> Piece:
         evidence=layout.evidence,
         view_angle=layout.view_angle,
         view_top=layout.view_top,
+        cameras=layout.cameras - keypoints[0],
     )
 
 

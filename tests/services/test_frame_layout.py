@@ -349,3 +349,20 @@ def test_a_frames_layout_knows_how_high_its_view_reaches(pitch: float) -> None:
     assert layout.view_top is not None
     assert math.degrees(layout.view_top) == pytest.approx(pitch + 31.9, abs=1.0)
     assert make_piece("f", layout).view_top == layout.view_top
+
+
+def test_a_frames_camera_stands_at_its_aligned_frames_origin() -> None:
+    # The optical centre is the local frame's origin, which the aligned frame keeps; a piece
+    # holds it relative to its chain's source.
+    room = Room.from_polygon(np.array([[0.0, 0], [6, 0], [6, 5], [0, 5]]), 2.6)
+    frame, pose = render_views(
+        room, Furnishing(), {"f": ((2.2, 2.0, 1.4), 225.0, -10.0)}, CAMERAS["realsense"]
+    )["f"]
+    layout = estimate_rgbd_layout(frame)
+    np.testing.assert_allclose(layout.cameras, np.zeros((1, 2)), atol=1e-9)
+    piece = make_piece("f", layout)
+    np.testing.assert_allclose(piece.cameras, -layout.keypoints[:1])
+    # In the world: the source's true position less the piece's offset is the camera.
+    world = (layout.keypoints_local() @ pose[:3, :3].T + pose[:3, 3])[:, :2]
+    spin = (pose[:3, :3] @ layout.frame.rotation.T)[:2, :2]  # aligned -> world, level
+    np.testing.assert_allclose(world[0] + piece.cameras[0] @ spin.T, pose[:2, 3], atol=0.02)

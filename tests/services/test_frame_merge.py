@@ -40,6 +40,9 @@ def test_overlapping_frames_merge_with_the_true_motion(views) -> None:
     assert [sorted(g.transforms) for g in groups] == [["a", "b"], ["c"]]
     layout = group_layout(groups[0], {"a": a, "b": b})
     assert layout.ok
+    # One camera per merged frame; both stood at the one station.
+    assert layout.cameras.shape == (2, 2)
+    assert np.linalg.norm(layout.cameras[0] - layout.cameras[1]) < 0.05
 
 
 def test_frames_looking_away_do_not_merge(views) -> None:

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from schemas.params import PlacementParams
-from services.placement import place_pieces, rot90, translations_of
+from services.placement import Piece, place_pieces, rot90, translations_of
 from services.placement.search import evaluate_placement
 from services.refinement import (
     Anchor,
@@ -15,7 +17,7 @@ from services.refinement import (
     stray_anchors,
     translation_spread,
 )
-from tests.conftest import chains_from_polygon, overlapping_halves
+from tests.conftest import bare_piece, chains_from_polygon, overlapping_halves
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -182,3 +184,81 @@ def test_a_lone_piece_has_no_spread():
     square = np.array([[0, 0], [6, 0], [6, 6], [0, 6]], dtype=np.float64)
     (whole,) = chains_from_polygon(square, [1.0], [0])
     assert translation_spread([whole], [0]) == 0.0
+
+
+# A 6 x 4 m room seen by four single-wall frames from its centre (3, 2): each sees its wall
+# 0.4 m short at both ends, so every junction hides a corner and 0.4 m either side of it.
+_WALLS = (
+    ((0.4, 0.0), (5.6, 0.0)),
+    ((6.0, 0.4), (6.0, 3.6)),
+    ((5.6, 4.0), (0.4, 4.0)),
+    ((0.0, 3.6), (0.0, 0.4)),
+)
+
+
+def _frames_around(camera: tuple[float, float] = (3.0, 2.0)) -> list[Piece]:
+    pieces = []
+    for k, (source, target) in enumerate(_WALLS):
+        chain = np.array([source, target]) - np.array(source)
+        offset = np.array([camera]) - np.array(source)
+        pieces.append(dataclasses.replace(bare_piece(f"f{k}", chain), cameras=offset))
+    return pieces
+
+
+def _end_to_end(pieces: list[Piece]) -> np.ndarray:
+    cand = evaluate_placement(pieces, [p.id for p in pieces], [0] * len(pieces))
+    assert cand is not None
+    return translations_of(pieces, cand)
+
+
+def test_frames_of_one_station_fix_the_room_the_junctions_leave_to_the_model():
+    # Joined end to end the room is 5.2 x 3.2 m, and the junctions' model (a hidden corner
+    # with no unseen wall on average) keeps it so; the four cameras, one station, make it
+    # the 6 x 4 m room they saw it from. Neighbours' cameras start 0.57 m apart, within
+    # reach, and joined pairwise they all coincide; opposite walls' start 0.8 m apart, out
+    # of reach, and are not taken in afterwards (that would chain stations together).
+    pieces = _frames_around()
+    start = _end_to_end(pieces)
+    guessed = refine_translations(pieces, [0] * 4, start, PlacementParams(station_reach=0.0))
+    joined = refine_translations(pieces, [0] * 4, start)
+    assert guessed.stations == ()
+    assert joined.status == "solved"
+    assert sorted(joined.stations) == [(0, 1), (0, 3), (1, 2), (2, 3)]
+    sources = joined.translations - joined.translations[0]
+    truth = np.array([source for source, _ in _WALLS]) - np.array(_WALLS[0][0])
+    assert sources == pytest.approx(truth, abs=0.05)
+    assert abs((guessed.translations[1] - guessed.translations[0])[0] - 5.6) > 0.3
+
+
+def test_cameras_out_of_each_others_reach_are_other_stations():
+    # Cameras 2 m or more apart are not taken for one station: the refinement is the one
+    # without cameras.
+    pieces = [
+        dataclasses.replace(p, cameras=p.cameras + shift)
+        for p, shift in zip(_frames_around(), ([0, 0], [2, 0], [2, 2], [0, 2]), strict=True)
+    ]
+    start = _end_to_end(pieces)
+    plain = refine_translations(pieces, [0] * 4, start, PlacementParams(station_reach=0.0))
+    refined = refine_translations(pieces, [0] * 4, start)
+    assert refined.stations == ()
+    assert np.allclose(refined.translations, plain.translations)
+
+
+def test_a_station_the_walls_keep_apart_is_dropped():
+    # Two frames of the bottom wall (cut in its middle, so their walls must stay on one
+    # line) whose cameras stand 0.5 m apart across it are two stations after all; the other
+    # pairs keep their station.
+    room = np.array([[0, 0], [6, 0], [6, 4], [0, 4]], dtype=np.float64)
+    chains = chains_from_polygon(room, [0.6, 3.0, 6.6, 10.6, 16.6], [0] * 5)
+    sources = np.array([[0.6, 0.0], [3.0, 0.0], [6.0, 0.6], [5.4, 4.0], [0.0, 3.4]])
+    cameras = np.array([[3.0, 1.5], [3.0, 2.0], [3.0, 2.0], [3.0, 2.0], [3.0, 2.0]])
+    pieces = [
+        dataclasses.replace(p, cameras=(camera - source)[None, :])
+        for p, source, camera in zip(chains, sources, cameras, strict=True)
+    ]
+    refined = refine_translations(pieces, [0] * 5, _end_to_end(pieces))
+    assert refined.status == "solved"
+    assert (0, 1) not in refined.stations
+    assert {(1, 2), (1, 3), (1, 4), (2, 3)} <= set(refined.stations)
+    walls = _sites(pieces, [0] * 5, refined.translations)
+    assert walls[0][0][1] == pytest.approx(walls[1][0][1], abs=0.11)  # still one line

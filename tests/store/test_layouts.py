@@ -67,3 +67,18 @@ def test_a_frames_view_angle_survives_the_wire():
     old = wire.model_dump(mode="json")
     del old["view_angle"]  # stored before the field existed: unknown, no shift
     assert layout_from_wire(LocalLayoutWire.model_validate(old)).view_angle is None
+
+
+def test_a_frames_cameras_survive_the_wire():
+    cameras = np.array([[0.0, 0.0], [0.31, -0.02]])
+    layout = dataclasses.replace(
+        scene_layouts()[small_scene("easy", 0).fragments[0].id], evidence="frame", cameras=cameras
+    )
+    wire = layout_to_wire(layout)
+    back = layout_from_wire(LocalLayoutWire.model_validate_json(wire.model_dump_json()))
+    assert np.array_equal(back.cameras, cameras)
+    old = wire.model_dump(mode="json")
+    del old["cameras"]  # stored before the field existed: no camera known, no station
+    assert layout_from_wire(LocalLayoutWire.model_validate(old)).cameras.shape == (0, 2)
+    cloud = scene_layouts()[small_scene("easy", 0).fragments[0].id]
+    assert layout_to_wire(cloud).cameras is None
