@@ -585,6 +585,12 @@ def place_site(
     main, alternatives, assemblies = _choose(layouts, pieces, placement, params, site_hints, sigmas)
     main, unexplained = _check_walls(_check_refinement(main, params), layouts, params)
     main, conflicting = _check_conflict(main, params)
+    if main.assembly is not None:
+        # The checks doubt the main room on what its floorplan shows, which its runners-up
+        # were not put to: none is reported likelier (the main fields hold the most
+        # probable room). Putting them to the checks and ranking again was tried: it swapped
+        # a right room, doubted for a relaxed refinement, for a wrong one.
+        alternatives = [_capped(room, main.assembly.probability) for room in alternatives]
     slid = 0
     doubted = main.assembly is not None and (
         main.assembly.probability < params.placement.closed_confidence

@@ -759,3 +759,10 @@ def test_a_room_whose_walls_do_not_fit_its_loop_is_not_said_closed():
     assert result.diagnostics["refinement"]["status"].startswith("relaxed")
     assert result.status != "closed"
     assert result.confidence <= PipelineParams().placement.relaxed_refinement_confidence
+    # Doubted below its runner-up's probability, the main room still heads the result: no
+    # alternative is reported likelier than it.
+    doubting = PipelineParams().placement.model_copy(update={"relaxed_refinement_confidence": 1e-4})
+    doubted = place_site(layouts, PipelineParams(placement=doubting))
+    assert doubted.confidence == pytest.approx(1e-4)
+    assert doubted.alternatives
+    assert all(alt.probability <= doubted.confidence for alt in doubted.alternatives)
