@@ -42,6 +42,7 @@ __all__ = [
 ]
 
 EXIT_OK, EXIT_INTERNAL, EXIT_NO_INPUT = 0, 1, 2
+EXIT_BAD_OPTION = 2  # an option's file or output path cannot be used (as no usable input)
 _SUFFIXES = (".ply", ".pcd", ".zip")
 
 
@@ -260,7 +261,7 @@ def run_align(
     problems, hints = _preflight(output, exports, hints_path)
     if problems:
         print("\n".join(problems), file=sys.stderr)
-        return EXIT_NO_INPUT
+        return EXIT_BAD_OPTION
     fragments = read_fragments(paths, params)
     if not fragments:
         print("error: no usable fragment", file=sys.stderr)
@@ -275,8 +276,10 @@ def run_align(
         _write_json(result.model_dump(mode="json"), output)
         notes = write_exports(exports, clouds, result)
     except OSError as exc:
+        # A path the checks before the run could not tell is unwritable (a special file
+        # system, a disk that filled up): the output's fault, not an internal failure.
         print(f"{exc.filename or 'export'}: cannot write: {exc.strerror or exc}", file=sys.stderr)
-        return EXIT_INTERNAL
+        return EXIT_BAD_OPTION
     for note in notes:
         print(note, file=sys.stderr)
     skipped = max(len(collect_paths(paths)) - len(fragments), 0)

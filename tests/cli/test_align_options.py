@@ -96,3 +96,14 @@ def test_unwritable_outputs_exit_2_before_anything_runs(
         f"{tmp_path / 'plain.txt'} is not a directory",
     ]
     assert process.stdout == ""
+
+
+def test_an_output_the_checks_cannot_foresee_failing_exits_2(
+    run_jigsaw: RunJigsaw, scene_dir: Path
+) -> None:
+    # /proc exists and root may write to it as far as os.access tells, but no file can be
+    # made there: the write fails after the run, and that is the output's fault (exit 2).
+    out = Path("/proc") / "fpj-no-such-output.json"
+    process = run_jigsaw("align", scene_dir, "-o", out)
+    assert process.returncode == 2, process.stderr
+    assert process.stderr.strip().splitlines()[-1].startswith(f"{out}: cannot write: ")
