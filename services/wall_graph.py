@@ -35,6 +35,7 @@ _MIN_UNSEEN = 0.5  # m, unseen wall an edge bridges to be left out of the second
 _ON_SEGMENT = 0.01  # m, a node this close to an edge's segment lies on it
 _LOW_WALL_SHARE = 0.5  # how much a cell with wall points but not the wall's full height covers
 _UNKNOWN_COST = 0.5  # what a cell showing neither wall nor space behind it costs a chain
+_MOUTH_LINTEL = 0.5  # share of a notch's mouth seen only high up that makes it a doorway
 
 
 @dataclass(frozen=True)
@@ -409,7 +410,61 @@ def find_wall_chain(
         return None
     order, cost = found
     points = _corners_only(np.array([nodes.points[i] for i in order]))
+    if not views:
+        points = _across_doorways(points, lines)
     return WallChain(keypoints=_ends_along_high_wall(points, lines), cost=cost)
+
+
+def _across_doorways(points: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
+    """The chain with each notch out of the room through a doorway closed along its wall.
+
+    Through an open door a scan sees the next room's floor and its far wall; a chain that
+    explains the most wall runs out through the door, along that far wall and back. Such a
+    notch goes out of the room (a right turn, two left turns and a right turn back onto the
+    wall it left), is no wider than a doorway, and its mouth shows a lintel: the wall across
+    it is seen only high up (``WallLine.lintel``), which an alcove open to the ceiling does
+    not show. The chain then runs straight across the mouth.
+    """
+    out = points
+    i = 1
+    while i + 4 < len(out):  # the walls before and after the notch are out[i - 1 : i + 5]
+        if _doorway_notch(out[i - 1 : i + 5], lines):
+            out = np.delete(out, slice(i, i + 4), axis=0)
+        else:
+            i += 1
+    return out
+
+
+def _doorway_notch(six: FloatArray, lines: Sequence[WallLine]) -> bool:
+    """Whether keypoints ``six`` (the wall before, the notch's four corners, the wall after)
+    hold a notch out through a doorway (see :func:`_across_doorways`)."""
+    steps = np.diff(six, axis=0)
+    lengths = np.linalg.norm(steps, axis=1)
+    if np.any(lengths < 1e-9):
+        return False
+    unit = steps / lengths[:, None]
+    before, out, across, back, after = unit
+    right_turn = before[0] * out[1] - before[1] * out[0] < -0.5
+    if not (
+        right_turn
+        and np.allclose(across, before)
+        and np.allclose(after, before)
+        and np.allclose(back, -out)
+        and lengths[2] <= MAX_DOORWAY
+    ):
+        return False
+    axis = int(abs(before[1]) > abs(before[0]))
+    travel = 1 if before[axis] > 0 else -1
+    mouth_start, mouth_end = six[1], six[4]
+    if abs(mouth_end[1 - axis] - mouth_start[1 - axis]) > _END_MATCH:
+        return False  # the wall after the notch is not the one before it
+    return any(
+        line.lintel_share(float(mouth_start[axis]), float(mouth_end[axis])) >= _MOUTH_LINTEL
+        for line in lines
+        if line.axis == axis
+        and line.travel == travel
+        and abs(line.offset - mouth_start[1 - axis]) < _END_MATCH
+    )
 
 
 def _closer_to_the_walls(

@@ -152,6 +152,14 @@ class WallLine:
         spans = _runs(flags[i0:i1], max_gap=_MAX_GAP_CELLS, min_len=1)
         return max((end - start for start, end in spans), default=0) * self.cell_size
 
+    def lintel_share(self, start: float, end: float) -> float:
+        """The share of the cells between two run coordinates seen only high up (a lintel
+        over an opening); 0 where the line has no lintel cells known or none lie between."""
+        i0, i1 = self._cells(start, end)
+        if self.lintel is None or i1 <= i0:
+            return 0.0
+        return float(np.mean(self.lintel[i0:i1]))
+
     def _cells(self, start: float, end: float) -> tuple[int, int]:
         lo, hi = sorted((start, end))
         i0 = int(np.clip(np.rint((lo - self.origin) / self.cell_size), 0, len(self.high)))

@@ -245,3 +245,35 @@ def test_a_corner_is_taken_when_its_wall_pays_its_price(price: float, corners: i
     assert found is not None
     keypoints = _corners_only(np.array([nodes.points[i] for i in found[0]]))
     assert len(keypoints) - 2 == corners
+
+
+def _doorway(lintel: bool, width: float = 1.0) -> list[WallLine]:
+    """A wall along x at y = 0 (interior +y, x from 0 to 10) with an opening ``width`` m wide
+    from x = 4.5, space seen on both sides of it, and behind it the next room's far wall
+    (y = -1.5) and the opening's sides, seen edge-on; the wall across the opening is seen
+    only high up when ``lintel`` (a door), not at all otherwise (an alcove open to the
+    ceiling)."""
+    lo, hi = 4.5, 4.5 + width
+    main = _line(0, 0.0, 1, [(0.0, lo), (hi, 10.0)])
+    mouth = np.zeros_like(main.high)
+    mouth[round((lo + 0.08 - main.origin) / CELL) : round((hi - 0.08 - main.origin) / CELL)] = True
+    main = dataclasses.replace(main, seen_through=mouth, lintel=mouth & lintel)
+    return [
+        main,
+        _line(1, lo, -1, [(-1.5, 0.0)]),
+        _line(0, -1.5, 1, [(lo, hi)]),
+        _line(1, hi, 1, [(-1.5, 0.0)]),
+    ]
+
+
+@pytest.mark.parametrize(("lintel", "width"), [(True, 1.0), (False, 1.0), (True, 2.5)])
+def test_a_chain_does_not_run_out_through_a_doorway(lintel: bool, width: float) -> None:
+    # The chain explaining the most wall runs out through the opening, along the far wall
+    # and back; under a lintel, and no wider than a doorway, the opening is a door and the
+    # chain runs across it. An alcove (no lintel) or a wider opening keeps its walls.
+    chain = find_wall_chain(_doorway(lintel, width), LayoutParams())
+    assert chain is not None
+    lo, hi = 4.5, 4.5 + width
+    detour = [[0, 0], [lo, 0], [lo, -1.5], [hi, -1.5], [hi, 0], [10, 0]]
+    expected = [[0, 0], [10, 0]] if lintel and width <= 2.0 else detour
+    assert np.allclose(chain.keypoints, np.array(expected, dtype=float), atol=0.05)
