@@ -35,7 +35,7 @@ _MIN_UNSEEN = 0.5  # m, unseen wall an edge bridges to be left out of the second
 _ON_SEGMENT = 0.01  # m, a node this close to an edge's segment lies on it
 _LOW_WALL_SHARE = 0.5  # how much a cell with wall points but not the wall's full height covers
 _UNKNOWN_COST = 0.5  # what a cell showing neither wall nor space behind it costs a chain
-_MOUTH_LINTEL = 0.5  # share of a notch's mouth seen only high up that makes it a doorway
+_MOUTH_STANDING = 0.5  # share of an opening's mouth where the wall stands (whole or lintel)
 
 
 @dataclass(frozen=True)
@@ -411,60 +411,119 @@ def find_wall_chain(
     order, cost = found
     points = _corners_only(np.array([nodes.points[i] for i in order]))
     if not views:
-        points = _across_doorways(points, lines)
+        points = _across_openings(points, lines)
     return WallChain(keypoints=_ends_along_high_wall(points, lines), cost=cost)
 
 
-def _across_doorways(points: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
-    """The chain with each notch out of the room through a doorway closed along its wall.
+def _across_openings(points: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
+    """The chain kept inside the room where it ran out through a door or window.
 
-    Through an open door a scan sees the next room's floor and its far wall; a chain that
-    explains the most wall runs out through the door, along that far wall and back. Such a
-    notch goes out of the room (a right turn, two left turns and a right turn back onto the
-    wall it left), is no wider than a doorway, and its mouth shows a lintel: the wall across
-    it is seen only high up (``WallLine.lintel``), which an alcove open to the ceiling does
-    not show. The chain then runs straight across the mouth.
+    Through an opening a scan sees the next room's floor and its far wall, and the chain
+    that explains the most wall runs out through it, along that far wall and back onto the
+    wall it left (a notch: right turn, left, left, right), or on to the next wall past the
+    corner beyond the opening (right, left, left; where the opening is in the wall after
+    the corner: on past the corner, left, left, right). Where the opening's wall stands
+    across the mouth (high evidence, or seen only high up: a lintel) over half of it, the
+    excursion is what the scan saw through the opening, and the chain runs along that wall
+    instead: across a notch no wider than a doorway, or on to the corner. An alcove open
+    to the ceiling or a step in the room shows no wall across its mouth and keeps its
+    walls.
     """
     out = points
     i = 1
-    while i + 4 < len(out):  # the walls before and after the notch are out[i - 1 : i + 5]
-        if _doorway_notch(out[i - 1 : i + 5], lines):
+    while i + 3 < len(out):  # out[i - 1 : i + 4] at least: a wall before and after
+        if i + 4 < len(out) and _doorway_notch(out[i - 1 : i + 5], lines):
             out = np.delete(out, slice(i, i + 4), axis=0)
-        else:
-            i += 1
+            continue
+        corner = _past_corner(out[i - 1 : i + 4], lines)
+        if corner is not None:
+            out = np.vstack([out[:i], corner[None, :], out[i + 3 :]])
+            continue
+        i += 1
     return out
+
+
+def _units(points: FloatArray) -> FloatArray | None:
+    """Unit steps between consecutive keypoints, or None when two coincide."""
+    steps = np.diff(points, axis=0)
+    lengths = np.linalg.norm(steps, axis=1)
+    if np.any(lengths < 1e-9):
+        return None
+    unit: FloatArray = steps / lengths[:, None]
+    return unit
+
+
+def _right_of(a: FloatArray, b: FloatArray) -> bool:
+    """Whether direction b is a right turn from direction a."""
+    return bool(a[0] * b[1] - a[1] * b[0] < -0.5)
+
+
+def _wall_stands(
+    lines: Sequence[WallLine], through: FloatArray, direction: FloatArray, a: float, b: float
+) -> bool:
+    """Whether the wall line through ``through`` running along ``direction`` (interior on
+    the left) stands over half of its stretch between run coordinates a and b."""
+    axis = int(abs(direction[1]) > abs(direction[0]))
+    travel = 1 if direction[axis] > 0 else -1
+    return any(
+        line.standing_share(a, b) >= _MOUTH_STANDING
+        for line in lines
+        if line.axis == axis
+        and line.travel == travel
+        and abs(line.offset - through[1 - axis]) < _END_MATCH
+    )
 
 
 def _doorway_notch(six: FloatArray, lines: Sequence[WallLine]) -> bool:
     """Whether keypoints ``six`` (the wall before, the notch's four corners, the wall after)
-    hold a notch out through a doorway (see :func:`_across_doorways`)."""
-    steps = np.diff(six, axis=0)
-    lengths = np.linalg.norm(steps, axis=1)
-    if np.any(lengths < 1e-9):
+    hold a notch out through a doorway (see :func:`_across_openings`)."""
+    unit = _units(six)
+    if unit is None:
         return False
-    unit = steps / lengths[:, None]
     before, out, across, back, after = unit
-    right_turn = before[0] * out[1] - before[1] * out[0] < -0.5
     if not (
-        right_turn
+        _right_of(before, out)
         and np.allclose(across, before)
         and np.allclose(after, before)
         and np.allclose(back, -out)
-        and lengths[2] <= MAX_DOORWAY
+        and float(np.linalg.norm(six[3] - six[2])) <= MAX_DOORWAY
     ):
         return False
     axis = int(abs(before[1]) > abs(before[0]))
-    travel = 1 if before[axis] > 0 else -1
-    mouth_start, mouth_end = six[1], six[4]
-    if abs(mouth_end[1 - axis] - mouth_start[1 - axis]) > _END_MATCH:
+    if abs(six[4, 1 - axis] - six[1, 1 - axis]) > _END_MATCH:
         return False  # the wall after the notch is not the one before it
-    return any(
-        line.lintel_share(float(mouth_start[axis]), float(mouth_end[axis])) >= _MOUTH_LINTEL
-        for line in lines
-        if line.axis == axis
-        and line.travel == travel
-        and abs(line.offset - mouth_start[1 - axis]) < _END_MATCH
-    )
+    return _wall_stands(lines, six[1], before, float(six[1, axis]), float(six[4, axis]))
+
+
+def _past_corner(five: FloatArray, lines: Sequence[WallLine]) -> FloatArray | None:
+    """The corner the chain ``five`` (its keypoints around an excursion) should have taken
+    instead of running out through an opening next to it (see :func:`_across_openings`),
+    or None."""
+    unit = _units(five)
+    if unit is None:
+        return None
+    u0, u1, u2, u3 = unit
+    if _right_of(u0, u1) and np.allclose(u2, u0) and np.allclose(u3, -u1):
+        # Along the wall, out, along the far wall, back in on the next wall.
+        axis = int(abs(u0[1]) > abs(u0[0]))
+        corner = five[1] + float((five[3] - five[1]) @ u0) * u0
+        inside = float((five[4] - five[1]) @ u1) < -_END_MATCH
+        mouth = (float(five[1, axis]), float(corner[axis]))
+        wall, along = five[1], u0
+    elif _right_of(u1, u0) and np.allclose(u2, -u0) and np.allclose(u3, u1):
+        # Along the wall before the corner on past it, along the far wall, back in, along
+        # the wall that holds the opening.
+        axis = int(abs(u3[1]) > abs(u3[0]))
+        corner = five[0] + float((five[3] - five[0]) @ u0) * u0
+        inside = float((five[0] - five[3]) @ u0) < -_END_MATCH
+        mouth = (float(corner[axis]), float(five[3, axis]))
+        wall, along = five[3], u3
+    else:
+        return None
+    if not inside or not _wall_stands(lines, wall, along, *mouth):
+        return None
+    found: FloatArray = corner
+    return found
 
 
 def _closer_to_the_walls(

@@ -152,13 +152,17 @@ class WallLine:
         spans = _runs(flags[i0:i1], max_gap=_MAX_GAP_CELLS, min_len=1)
         return max((end - start for start, end in spans), default=0) * self.cell_size
 
-    def lintel_share(self, start: float, end: float) -> float:
-        """The share of the cells between two run coordinates seen only high up (a lintel
-        over an opening); 0 where the line has no lintel cells known or none lie between."""
+    def standing_share(self, start: float, end: float) -> float:
+        """The share of the cells between two run coordinates where the line's wall stands,
+        whole (high evidence) or over an opening (seen only high up, a lintel); 0 where
+        none lie between."""
         i0, i1 = self._cells(start, end)
-        if self.lintel is None or i1 <= i0:
+        if i1 <= i0:
             return 0.0
-        return float(np.mean(self.lintel[i0:i1]))
+        standing = self.high[i0:i1]
+        if self.lintel is not None:
+            standing = standing | self.lintel[i0:i1]
+        return float(np.mean(standing))
 
     def _cells(self, start: float, end: float) -> tuple[int, int]:
         lo, hi = sorted((start, end))

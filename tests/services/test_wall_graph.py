@@ -9,6 +9,7 @@ import pytest
 
 from schemas.params import LayoutParams
 from services.wall_graph import (
+    _across_openings,
     _best_path,
     _build_nodes,
     _corners_only,
@@ -277,3 +278,44 @@ def test_a_chain_does_not_run_out_through_a_doorway(lintel: bool, width: float) 
     detour = [[0, 0], [lo, 0], [lo, -1.5], [hi, -1.5], [hi, 0], [10, 0]]
     expected = [[0, 0], [10, 0]] if lintel and width <= 2.0 else detour
     assert np.allclose(chain.keypoints, np.array(expected, dtype=float), atol=0.05)
+
+
+def _wall_with_opening(
+    axis: int,
+    travel: int,
+    spans: list[tuple[float, float]],
+    opening: tuple[float, float],
+    standing: bool,
+) -> WallLine:
+    """A wall line whose wall is seen over ``spans`` and, when ``standing``, only high up over
+    ``opening`` (a window's lintel); nothing there otherwise (the room steps out)."""
+    line = _line(axis, 0.0 if axis else 2.0, travel, spans if standing else spans[:1])
+    lintel = np.zeros_like(line.high)
+    lo, hi = sorted(opening)
+    lintel[round((lo - line.origin) / CELL) : round((hi - line.origin) / CELL)] = standing
+    return dataclasses.replace(line, lintel=lintel)
+
+
+@pytest.mark.parametrize("standing", [True, False])
+def test_a_chain_does_not_run_out_through_an_opening_before_a_corner(standing: bool) -> None:
+    # Up the wall x = 0 (interior -x), out through an opening at y = 0..1.5 to the next
+    # room's far wall 1.3 m behind, up it, and back along the top wall (y = 2) past the
+    # corner (0, 2): the chain should have turned at the corner. Without wall across the
+    # opening, the room itself steps out there.
+    chain = np.array([[0.0, -3.0], [0.0, 0.0], [1.3, 0.0], [1.3, 2.0], [-3.0, 2.0]])
+    wall = _wall_with_opening(1, 1, [(-3.0, 0.0), (1.5, 2.0)], (0.0, 1.5), standing)
+    kept = _across_openings(chain, [wall])
+    expected = [[0.0, -3.0], [0.0, 2.0], [-3.0, 2.0]] if standing else chain
+    assert np.allclose(kept, expected)
+
+
+@pytest.mark.parametrize("standing", [True, False])
+def test_a_chain_does_not_run_out_through_an_opening_after_a_corner(standing: bool) -> None:
+    # Up the wall x = 0 past the corner (0, 2), through an opening in the top wall (y = 2,
+    # interior -y, x = -1.5..0) to the next room's far wall at y = 3.3, along it, back in
+    # and along the top wall: the chain should have turned at the corner.
+    chain = np.array([[0.0, -3.0], [0.0, 3.3], [-1.5, 3.3], [-1.5, 2.0], [-5.0, 2.0]])
+    wall = _wall_with_opening(0, -1, [(-5.0, -1.5), (-0.2, 0.0)], (-1.5, 0.0), standing)
+    kept = _across_openings(chain, [wall])
+    expected = [[0.0, -3.0], [0.0, 2.0], [-5.0, 2.0]] if standing else chain
+    assert np.allclose(kept, expected)
