@@ -70,7 +70,11 @@ def main(
 
 
 PathsArg = Annotated[
-    list[Path], typer.Argument(help="fragment files, or directories of *.ply / *.pcd files")
+    list[Path],
+    typer.Argument(
+        help="fragments: PLY / PCD files, RGB-D frame folders (depth.png, intrinsics.json) "
+        "or their zips, TUM / Redwood datasets, or directories holding these"
+    ),
 ]
 OutOpt = Annotated[Path | None, typer.Option("-o", "--output", help="output JSON (default stdout)")]
 
