@@ -173,6 +173,16 @@ class PlacementParams(_Frozen):
     station_sigma: float = Field(
         0.05, gt=0, description="how closely the cameras of one station coincide, m"
     )
+    station_weight: float = Field(
+        1.0,
+        ge=0,
+        description="RGB-D frames: energy per unit of the kept assemblies' stations term "
+        "(services.stations: each camera's distance to the nearest other frame's, at most "
+        "station_reach, squared over twice station_spread squared); 0 turns it off",
+    )
+    station_spread: float = Field(
+        0.3, gt=0, description="how far a refined loop may leave one station's cameras, m"
+    )
     station_outlier: float = Field(
         0.25,
         gt=0,

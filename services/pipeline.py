@@ -63,6 +63,7 @@ from services.refinement import (
 )
 from services.registration import premerge
 from services.rgbd import RgbdFrame
+from services.stations import with_station_cost
 from services.types import FloatArray, LocalLayout, ParsedFragment, ProgressFn
 from services.wall_evidence import unexplained_walls
 
@@ -573,6 +574,8 @@ def place_site(
     root_first = _root_first(sorted(usable), site_hints)
     pieces = {fid: make_piece(fid, layouts[fid]) for fid in root_first}
     placement = place_pieces(list(pieces.values()), params.placement, site_hints)
+    if placement is not None:
+        placement = with_station_cost(placement, list(pieces.values()), params.placement)
     if placement is None:
         report("done", 1.0)
         return ResultModel(

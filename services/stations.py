@@ -1,0 +1,95 @@
+"""Frames taken from one station: the kept assemblies scored by where their cameras stand.
+
+Frames of a robot turning on the spot, or of a tripod, share their camera. In the right
+assembly their cameras, once the loop is refined (which already makes the cameras of one
+station coincide, :mod:`services.refinement`), stand together; in a rival that turns a
+frame a quarter or swaps two of them, the cameras scatter. Each kept assembly of a site of
+RGB-D frames is refined and gets an energy term of its own, the ``stations`` feature: per
+camera, the squared distance to the nearest camera of another frame (at most the station
+reach: cameras farther apart are other stations, and cost no more) over twice
+``station_spread`` squared, weighted by ``station_weight``. The search does not see it (it
+is known only once a loop is refined), so it ranks the assemblies the search kept, as the
+floor seen outside them does. Clouds have no cameras: their placement is returned as it is.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from schemas.params import PlacementParams
+from services.placement import Piece, Placement, PlacementCandidate, rot90, translations_of
+from services.refinement import refine_translations
+from services.types import FloatArray
+
+__all__ = ["station_cost", "with_station_cost"]
+
+
+def station_cost(cameras: Sequence[FloatArray], reach: float, spread: float) -> float:
+    """The ``stations`` feature of one placed assembly.
+
+    cameras: per piece, (C, 2) its cameras' positions in the site frame (C may be 0).
+    Each camera costs its distance to the nearest camera of another piece, capped at
+    ``reach``, squared over ``2 spread^2``; 0 with fewer than two pieces with cameras.
+
+    >>> station_cost([np.zeros((1, 2)), np.array([[0.3, 0.0]])], 0.6, 0.3)
+    1.0
+    >>> station_cost([np.zeros((1, 2)), np.array([[5.0, 0.0]])], 0.6, 0.3)
+    4.0
+    """
+    owners = np.concatenate([np.full(len(c), k) for k, c in enumerate(cameras)])
+    if len(set(owners.tolist())) < 2:
+        return 0.0
+    points = np.concatenate([c for c in cameras if len(c)])
+    distance = np.linalg.norm(points[:, None, :] - points[None, :, :], axis=2)
+    distance[owners[:, None] == owners[None, :]] = np.inf  # a piece's own cameras
+    nearest = np.minimum(distance.min(axis=1), reach)
+    return float(np.sum(nearest**2) / (2.0 * spread**2))
+
+
+def with_station_cost(
+    placement: Placement, pieces: Sequence[Piece], params: PlacementParams
+) -> Placement:
+    """The placement with every kept closed assembly's energy raised by its ``stations``
+    term and the assemblies ranked again (the best's translations recomputed); the same
+    placement when fewer than two pieces have cameras, the weight is 0 or no loop closed.
+    """
+    if (
+        params.station_weight == 0.0
+        or not placement.closed
+        or sum(len(p.cameras) > 0 for p in pieces) < 2
+    ):
+        return placement
+    by_id = {p.id: p for p in pieces}
+    scored = [_scored(c, by_id, pieces, placement, params) for c in placement.candidates]
+    ranked = sorted(scored, key=lambda c: c.energy)
+    return replace(
+        placement,
+        best=ranked[0],
+        translations=translations_of(pieces, ranked[0]),
+        alternatives=tuple(ranked[1:]),
+    )
+
+
+def _scored(
+    cand: PlacementCandidate,
+    by_id: dict[str, Piece],
+    pieces: Sequence[Piece],
+    placement: Placement,
+    params: PlacementParams,
+) -> PlacementCandidate:
+    """One candidate with its ``stations`` term counted in (open chains as they are)."""
+    if cand.missing:
+        return cand
+    ordered = [by_id[fid] for fid in cand.order]
+    start = translations_of(pieces, cand)
+    refined = refine_translations(ordered, cand.rotations, start, params, placement.measured)
+    cameras = [
+        p.cameras @ rot90(r).T + t
+        for p, r, t in zip(ordered, cand.rotations, refined.translations, strict=True)
+    ]
+    cost = station_cost(cameras, params.station_reach, params.station_spread)
+    features = {**cand.features, "stations": cost}
+    return replace(cand, energy=cand.energy + params.station_weight * cost, features=features)

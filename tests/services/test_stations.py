@@ -1,0 +1,75 @@
+"""Frames of one station: the kept assemblies ranked by where their cameras stand."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from schemas.params import PlacementParams
+from services.placement import Piece, place_pieces, rot90
+from services.stations import station_cost, with_station_cost
+from tests.conftest import chains_from_polygon
+
+pytestmark = pytest.mark.timeout(60)
+
+ROOM = np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 4.0], [0.0, 4.0]])
+SOURCES = ROOM  # the four frames are cut at the corners: each sees one whole wall
+TURNS = [0, 1, 2, 3]  # each frame's own frame is turned by this many quarters
+
+
+# Two stations: the frames of the bottom and right walls from one, the others' from another.
+STATIONS = np.array([[4.5, 1.0], [4.5, 1.0], [1.0, 3.0], [1.0, 3.0]])
+
+
+def _frames(cameras: np.ndarray | None) -> list[Piece]:
+    """The four single-wall frames of the 6 x 4 m room, each taken from its camera (world;
+    none: clouds)."""
+    pieces = chains_from_polygon(ROOM, [0.0, 6.0, 10.0, 16.0], TURNS)
+    if cameras is None:
+        return pieces
+    return [
+        dataclasses.replace(p, cameras=((camera - source) @ rot90(turn).T)[None, :])
+        for p, camera, source, turn in zip(pieces, cameras, SOURCES, TURNS, strict=True)
+    ]
+
+
+def test_the_assembly_whose_cameras_stand_together_wins_a_tie() -> None:
+    # A rectangle's opposite walls look alike: the frames of its two short walls fit each
+    # other's wall as well, each turned half. The walls cannot tell those assemblies apart;
+    # the stations, off the room's centre, can.
+    plain = place_pieces(_frames(None))
+    assert plain is not None
+    rivals = [c for c in plain.candidates if c.energy <= plain.best.energy + 1e-9]
+    assert len(rivals) >= 2  # a tie among the look-alikes
+    pieces = _frames(STATIONS)
+    placement = place_pieces(pieces)
+    assert placement is not None
+    ranked = with_station_cost(placement, pieces, PlacementParams())
+    assert ranked.best.order == ("p0", "p1", "p2", "p3")
+    assert ranked.best.rotations == (0, 3, 2, 1)  # each frame turned back into the room's
+    assert ranked.best.features["stations"] == pytest.approx(0.0, abs=1e-3)
+    assert all(c.features["stations"] > 1.0 for c in ranked.alternatives if not c.missing)
+    assert ranked.alternatives[0].energy > ranked.best.energy + 1.0
+    np.testing.assert_allclose(ranked.translations, SOURCES, atol=1e-6)
+
+
+def test_clouds_and_a_weight_of_nothing_leave_the_placement_as_it_is() -> None:
+    clouds = _frames(None)
+    placement = place_pieces(clouds)
+    assert placement is not None
+    assert with_station_cost(placement, clouds, PlacementParams()) is placement
+    frames = _frames(STATIONS)
+    placement = place_pieces(frames)
+    assert placement is not None
+    off = PlacementParams(station_weight=0.0)
+    assert with_station_cost(placement, frames, off) is placement
+
+
+def test_a_station_cost_counts_each_camera_to_its_nearest_other_frame() -> None:
+    one = np.zeros((1, 2))
+    # Two cameras of one frame do not make a station of it.
+    assert station_cost([np.array([[0.0, 0.0], [0.1, 0.0]])], 0.6, 0.3) == 0.0
+    near = station_cost([one, np.array([[0.3, 0.0]]), np.array([[3.0, 0.0]])], 0.6, 0.3)
+    assert near == pytest.approx(0.5 + 0.5 + 2.0)  # the far camera costs the cap
