@@ -7,7 +7,8 @@ For every scene of a split whose main room is wrong, one cause:
   was unusable (no assembly of these chains can be the room);
 * ``not a loop``: the true order and turns do not make a valid closed loop of these chains
   (walls cross, or a junction folds back): the search cannot return it;
-* ``search``: the true assembly has a lower energy than the best found (the search missed
+* ``search``: the true assembly has a lower energy than the best found (frames: with its
+  cameras' ``stations`` term, as the kept assemblies are ranked; the search missed
   it);
 * ``energy``: the energy ranks another assembly below the truth; the table then says by how
   many nats and which terms favour the rival (weighted, truth minus best: positive means
@@ -53,8 +54,9 @@ from bench.world_scenes import (
 from schemas.params import PipelineParams
 from services.evaluation import evaluate_result
 from services.pipeline import place_site
-from services.placement import evaluate_placement, make_piece
+from services.placement import evaluate_placement, make_piece, place_pieces
 from services.placement.energy import FEATURES, feature_weights
+from services.stations import counts_stations, with_station_scored
 from services.synthetic.render import CAMERAS
 
 __all__ = ["CAUSES", "Anatomy", "anatomy_of", "frame_scenes", "main"]
@@ -100,6 +102,11 @@ def anatomy_of(scene: CachedScene, params: PipelineParams) -> Anatomy:
     truth = evaluate_placement(pieces, order, rotations, params.placement)
     if truth is None:
         return _with(base, "not a loop")
+    if counts_stations(pieces, params.placement):
+        # Frames' assemblies are ranked with their cameras' term: the truth is scored so too.
+        searched = place_pieces(pieces, params.placement)
+        measured = searched.measured if searched is not None else {}
+        truth = with_station_scored(truth, pieces, measured, params.placement)
     energy = result["diagnostics"].get("energy")
     if energy is None:
         return _with(base, "search")

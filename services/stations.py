@@ -14,7 +14,7 @@ floor seen outside them does. Clouds have no cameras: their placement is returne
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -24,7 +24,7 @@ from services.placement import Piece, Placement, PlacementCandidate, rot90, tran
 from services.refinement import refine_translations
 from services.types import FloatArray
 
-__all__ = ["station_cost", "with_station_cost"]
+__all__ = ["counts_stations", "station_cost", "with_station_cost", "with_station_scored"]
 
 
 def station_cost(cameras: Sequence[FloatArray], reach: float, spread: float) -> float:
@@ -56,14 +56,11 @@ def with_station_cost(
     term and the assemblies ranked again (the best's translations recomputed); the same
     placement when fewer than two pieces have cameras, the weight is 0 or no loop closed.
     """
-    if (
-        params.station_weight == 0.0
-        or not placement.closed
-        or sum(len(p.cameras) > 0 for p in pieces) < 2
-    ):
+    if not placement.closed or not counts_stations(pieces, params):
         return placement
-    by_id = {p.id: p for p in pieces}
-    scored = [_scored(c, by_id, pieces, placement, params) for c in placement.candidates]
+    scored = [
+        with_station_scored(c, pieces, placement.measured, params) for c in placement.candidates
+    ]
     ranked = sorted(scored, key=lambda c: c.energy)
     return replace(
         placement,
@@ -73,19 +70,29 @@ def with_station_cost(
     )
 
 
-def _scored(
+def counts_stations(pieces: Sequence[Piece], params: PlacementParams) -> bool:
+    """Whether the ``stations`` term ranks these pieces' assemblies: a non-zero weight and
+    at least two pieces with cameras."""
+    return params.station_weight != 0.0 and sum(len(p.cameras) > 0 for p in pieces) >= 2
+
+
+def with_station_scored(
     cand: PlacementCandidate,
-    by_id: dict[str, Piece],
     pieces: Sequence[Piece],
-    placement: Placement,
+    measured: Mapping[tuple[str, str], float],
     params: PlacementParams,
 ) -> PlacementCandidate:
-    """One candidate with its ``stations`` term counted in (open chains as they are)."""
+    """One candidate with its ``stations`` term counted in (open chains as they are).
+
+    measured: the overlaps and gaps the junctions' structure measured
+    (``Placement.measured``), which the refinement uses.
+    """
     if cand.missing:
         return cand
+    by_id = {p.id: p for p in pieces}
     ordered = [by_id[fid] for fid in cand.order]
     start = translations_of(pieces, cand)
-    refined = refine_translations(ordered, cand.rotations, start, params, placement.measured)
+    refined = refine_translations(ordered, cand.rotations, start, params, measured)
     cameras = [
         p.cameras @ rot90(r).T + t
         for p, r, t in zip(ordered, cand.rotations, refined.translations, strict=True)
