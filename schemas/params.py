@@ -350,6 +350,16 @@ class PlacementParams(_Frozen):
         le=1,
         description="the most such a room's confidence can be (below closed_confidence)",
     )
+    truncated_search_confidence: float = Field(
+        0.98,
+        ge=0,
+        le=1,
+        description="the most a room's confidence can be when the search ran out of nodes "
+        "and no prior poses led it: the assemblies it kept may all be one room's near-copies "
+        "while a rival lay beyond the budget, so it cannot say no serious rival exists (a "
+        "15-fragment corridor of the outside benchmark was closed at 0.995 and wrong, its 24 "
+        "kept assemblies 22 copies of one room)",
+    )
     relaxed_refinement_confidence: float = Field(
         0.25,
         ge=0,

@@ -414,6 +414,17 @@ def _check_refinement(main: _Placed, params: PipelineParams) -> _Placed:
     return _capped(main, params.placement.relaxed_refinement_confidence)
 
 
+def _check_search(
+    main: _Placed, placement: Placement, hints: SiteHints, params: PipelineParams
+) -> tuple[_Placed, bool]:
+    """The main room with its confidence capped when the search ran out of nodes without
+    prior poses to lead it (what it kept is not every serious rival: its best few may be
+    near-copies of one room, so the room is not one to say closed), and whether it was."""
+    if main.assembly is None or placement.exhaustive or hints.priors:
+        return main, False
+    return _capped(main, params.placement.truncated_search_confidence), True
+
+
 def _check_conflict(main: _Placed, params: PipelineParams) -> tuple[_Placed, float]:
     """The main room with its confidence capped when ``conflict_wall_limit`` or more of its
     walls run through space another scan saw empty, and those meters (0 when under the
@@ -426,7 +437,12 @@ def _check_conflict(main: _Placed, params: PipelineParams) -> tuple[_Placed, flo
 
 
 def _doubts(
-    main: _Placed, status: str, unexplained: dict[str, float], conflicting: float, slid: int
+    main: _Placed,
+    status: str,
+    unexplained: dict[str, float],
+    conflicting: float,
+    slid: int,
+    cut_short: bool,
 ) -> dict[str, Any]:
     """The diagnostics that say why a room that closes is not said closed (only those that
     apply)."""
@@ -439,6 +455,8 @@ def _doubts(
         doubts["conflicting_walls"] = conflicting  # its walls cross space scans saw empty
     if slid:
         doubts["slid_alternatives"] = slid  # the runners-up are this room resized
+    if cut_short:
+        doubts["search_cut_short"] = True  # rivals may lie beyond the search's budget
     if main.polygon is not None and not main.rectilinear:
         doubts["floorplan_not_rectilinear"] = True
     return doubts
@@ -588,6 +606,7 @@ def place_site(
     main, alternatives, assemblies = _choose(layouts, pieces, placement, params, site_hints, sigmas)
     main, unexplained = _check_walls(_check_refinement(main, params), layouts, params)
     main, conflicting = _check_conflict(main, params)
+    main, cut_short = _check_search(main, placement, site_hints, params)
     if main.assembly is not None:
         # The checks doubt the main room on what its floorplan shows, which its runners-up
         # were not put to: none is reported likelier (the main fields hold the most
@@ -621,7 +640,7 @@ def place_site(
     # What the chains rest on: frames and thin clouds lower the confidence (its maps per kind).
     kinds = [layouts[fid].evidence for fid in usable]
     diagnostics["evidence"] = {kind: kinds.count(kind) for kind in sorted(set(kinds))}
-    diagnostics.update(_doubts(main, status, unexplained, conflicting, slid))
+    diagnostics.update(_doubts(main, status, unexplained, conflicting, slid, cut_short))
     report("done", 1.0)
     return ResultModel(
         status=status,

@@ -766,3 +766,18 @@ def test_a_room_whose_walls_do_not_fit_its_loop_is_not_said_closed():
     assert doubted.confidence == pytest.approx(1e-4)
     assert doubted.alternatives
     assert all(alt.probability <= doubted.confidence for alt in doubted.alternatives)
+
+
+def test_a_room_whose_search_ran_out_of_nodes_is_not_said_closed() -> None:
+    # Its best few assemblies may all be copies of one room while a rival lay beyond the
+    # budget: it cannot say that no serious rival exists. With the budget it needs, the
+    # same room closes; cut short, it is the main room of an ambiguous result.
+    layouts = scene_layouts()
+    assert place_site(layouts).status == "closed"
+    short = PipelineParams().placement.model_copy(update={"max_search_nodes": 5})
+    result = place_site(layouts, PipelineParams(placement=short))
+    assert result.diagnostics["search"]["exhaustive"] is False
+    assert result.status != "closed"
+    assert result.confidence == pytest.approx(short.truncated_search_confidence)
+    assert result.diagnostics["search_cut_short"] is True
+    assert result.floorplan.rooms  # still the best guess
