@@ -152,8 +152,19 @@ def run_layout(paths: list[Path], output: Path | None, params: PipelineParams | 
         )
         for fid, lay in layouts.items()
     ]
-    _write_json(LayoutFileModel(fragments=fragments).model_dump(mode="json"), output)
+    try:
+        _write_json(LayoutFileModel(fragments=fragments).model_dump(mode="json"), output)
+    except OSError as exc:
+        return _cannot_write(exc)
     return EXIT_OK
+
+
+def _cannot_write(exc: OSError) -> int:
+    """Report an output that failed after the run; returns the exit code. A path the checks
+    before the run could not tell is unwritable (a special file system, a disk that filled
+    up) is the output's fault, not an internal failure."""
+    print(f"{exc.filename or 'export'}: cannot write: {exc.strerror or exc}", file=sys.stderr)
+    return EXIT_BAD_OPTION
 
 
 class _AlignProgress:
@@ -276,10 +287,7 @@ def run_align(
         _write_json(result.model_dump(mode="json"), output)
         notes = write_exports(exports, clouds, result)
     except OSError as exc:
-        # A path the checks before the run could not tell is unwritable (a special file
-        # system, a disk that filled up): the output's fault, not an internal failure.
-        print(f"{exc.filename or 'export'}: cannot write: {exc.strerror or exc}", file=sys.stderr)
-        return EXIT_BAD_OPTION
+        return _cannot_write(exc)
     for note in notes:
         print(note, file=sys.stderr)
     skipped = max(len(collect_paths(paths)) - len(fragments), 0)

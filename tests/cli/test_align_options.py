@@ -107,3 +107,6 @@ def test_an_output_the_checks_cannot_foresee_failing_exits_2(
     process = run_jigsaw("align", scene_dir, "-o", out)
     assert process.returncode == 2, process.stderr
     assert process.stderr.strip().splitlines()[-1].startswith(f"{out}: cannot write: ")
+    layout = run_jigsaw("layout", scene_dir, "-o", out)
+    assert layout.returncode == 2, layout.stderr
+    assert layout.stderr.strip().splitlines()[-1].startswith(f"{out}: cannot write: ")
