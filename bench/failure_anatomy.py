@@ -54,14 +54,15 @@ from bench.world_scenes import (
 from schemas.params import PipelineParams
 from services.evaluation import evaluate_result
 from services.pipeline import place_site
-from services.placement import evaluate_placement, make_piece, place_pieces
+from services.placement import evaluate_placement, make_piece
 from services.placement.energy import FEATURES, feature_weights
 from services.stations import counts_stations, with_station_scored
 from services.synthetic.render import CAMERAS
 
-__all__ = ["CAUSES", "Anatomy", "anatomy_of", "frame_scenes", "main"]
+__all__ = ["CAUSES", "TERMS", "Anatomy", "anatomy_of", "frame_scenes", "main"]
 
 CAUSES = ("layout", "not a loop", "search", "energy", "geometry", "ranking")
+TERMS = (*FEATURES, "stations")  # the energy's terms: the search's and the frames' cameras'
 # nats: the truth's energy evaluated again outside the search differs from the result's by
 # float noise (2e-6 seen on frame rooms whose main room is the true assembly).
 _TIE = 1e-4
@@ -103,17 +104,17 @@ def anatomy_of(scene: CachedScene, params: PipelineParams) -> Anatomy:
     if truth is None:
         return _with(base, "not a loop")
     if counts_stations(pieces, params.placement):
-        # Frames' assemblies are ranked with their cameras' term: the truth is scored so too.
-        searched = place_pieces(pieces, params.placement)
-        measured = searched.measured if searched is not None else {}
-        truth = with_station_scored(truth, pieces, measured, params.placement)
+        # Frames' assemblies are ranked with their cameras' term: the truth is scored so too
+        # (its junctions' overlaps measured again, as the search measures them).
+        truth = with_station_scored(truth, pieces, None, params.placement)
     energy = result["diagnostics"].get("energy")
     if energy is None:
         return _with(base, "search")
     weights = dict(zip(FEATURES, feature_weights(params.placement, pieces), strict=True))
+    weights["stations"] = params.placement.station_weight
     terms = {
-        name: weights[name] * (truth.features[name] - float(energy.get(name, 0.0)))
-        for name in FEATURES
+        name: weights[name] * (truth.features.get(name, 0.0) - float(energy.get(name, 0.0)))
+        for name in TERMS
     }
     gap = truth.energy - float(energy["total"])
     lowest = min(float(a["energy"]) for a in result["diagnostics"]["assemblies"])
@@ -193,14 +194,14 @@ def term_table(rows: Sequence[Anatomy]) -> Table:
     )
     table.add_column("set / fragments")
     table.add_column("rooms", justify="right")
-    for name in FEATURES:
+    for name in TERMS:
         table.add_column(name, justify="right")
     for label, members in bucket_groups(rows):
         energy = [r for r in members if r.cause == "energy"]
         if not energy:
             continue
         cells = []
-        for name in FEATURES:
+        for name in TERMS:
             values = np.array([r.terms.get(name, 0.0) for r in energy])
             cells.append(f"{values.mean():+.2f} ({np.mean(values > 1e-6):.0%})")
         table.add_row(label, str(len(energy)), *cells)

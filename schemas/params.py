@@ -167,8 +167,9 @@ class PlacementParams(_Frozen):
         description="RGB-D frames: cameras of two pieces the refined loop puts closer than "
         "this are taken as one station (a robot turning on the spot, a tripod) and made to "
         "coincide (stations of one room lie farther apart: at 0.8-1 m the benchmark's "
-        "generator's stations of one room were taken as one and rooms lost); 0 turns it "
-        "off, m",
+        "generator's stations of one room were taken as one and rooms lost); also the most a "
+        "camera adds to the stations term (a camera farther from every other piece's stands "
+        "at a station of its own); 0 turns both off, m",
     )
     station_sigma: float = Field(
         0.05, gt=0, description="how closely the cameras of one station coincide, m"
@@ -177,11 +178,14 @@ class PlacementParams(_Frozen):
         1.0,
         ge=0,
         description="RGB-D frames: energy per unit of the kept assemblies' stations term "
-        "(services.stations: each camera's distance to the nearest other frame's, at most "
+        "(services.stations: each camera's distance to the nearest other piece's, at most "
         "station_reach, squared over twice station_spread squared); 0 turns it off",
     )
     station_spread: float = Field(
-        0.3, gt=0, description="how far a refined loop may leave one station's cameras, m"
+        0.3,
+        gt=0,
+        description="RGB-D frames: the scale of the stations term: a camera this far from "
+        "the nearest other piece's costs 0.5, m",
     )
     station_outlier: float = Field(
         0.25,

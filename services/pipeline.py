@@ -52,12 +52,11 @@ from services.placement import (
 from services.placement.priors import (
     chain_placement,
     fit_frame,
-    priors_in_site_frame,
     wrap_angle,
 )
 from services.refinement import (
-    Anchor,
     Refinement,
+    prior_anchors,
     refine_translations,
     widest_slide,
 )
@@ -164,7 +163,7 @@ def _concrete(
     anchor the refinement)."""
     ordered = [pieces[fid] for fid in cand.order]
     if cand.missing == 0:
-        anchors = _anchors(hints, cand, translations)
+        anchors = prior_anchors(hints, cand, translations)
         refined = refine_translations(
             ordered, cand.rotations, translations, params.placement, measured, anchors
         )
@@ -185,22 +184,6 @@ def _concrete(
     return _Placed(assembly, cand, refined, poses, polygon, rectilinear)
 
 
-def _anchors(
-    hints: SiteHints, cand: PlacementCandidate, translations: FloatArray
-) -> list[Anchor | None]:
-    """The prior position of each piece's source in the site frame (loop order; None
-    without a prior), through the hints' frame fitted to the unrefined assembly."""
-    if len(hints.priors) < 2:
-        return []
-    rotations = dict(zip(cand.order, cand.rotations, strict=True))
-    sources = {fid: translations[k] for k, fid in enumerate(cand.order)}
-    positions = priors_in_site_frame(hints.priors, rotations, sources)
-    return [
-        Anchor(positions[fid], hints.priors[fid].source_sigma) if fid in positions else None
-        for fid in cand.order
-    ]
-
-
 def _trusted_sigmas(
     hints: SiteHints,
     placement: Placement,
@@ -211,7 +194,7 @@ def _trusted_sigmas(
     The refinement drops a stray prior (``Refinement.strays``), so it pins nothing: counted
     in the room's slack, a room would close on priors its floorplan did not use."""
     best = placement.best
-    anchors = _anchors(hints, best, placement.translations)
+    anchors = prior_anchors(hints, best, placement.translations)
     if not anchors or best.missing:
         return hints.prior_sigmas()  # fewer than two priors, or no loop to refine
     ordered = [pieces[fid] for fid in best.order]
@@ -462,6 +445,14 @@ def _doubts(
     return doubts
 
 
+def _doubted(assembly: Assembly, chosen: Assembly | None, main: Assembly) -> Assembly:
+    """An assembly found, as the doubt caps left the main room ``main`` (which was
+    ``chosen`` before them): the main itself as capped, any other at most as probable."""
+    if assembly is chosen:
+        return main
+    return dataclasses.replace(assembly, probability=min(assembly.probability, main.probability))
+
+
 def _capped(main: _Placed, most: float) -> _Placed:
     """The main room with its probability at most ``most``."""
     assert main.assembly is not None
@@ -593,7 +584,9 @@ def place_site(
     pieces = {fid: make_piece(fid, layouts[fid]) for fid in root_first}
     placement = place_pieces(list(pieces.values()), params.placement, site_hints)
     if placement is not None:
-        placement = with_station_cost(placement, list(pieces.values()), params.placement)
+        placement = with_station_cost(
+            placement, list(pieces.values()), params.placement, site_hints
+        )
     if placement is None:
         report("done", 1.0)
         return ResultModel(
@@ -604,6 +597,7 @@ def place_site(
     report("refinement", 0.7)
     sigmas = _trusted_sigmas(site_hints, placement, pieces, params)
     main, alternatives, assemblies = _choose(layouts, pieces, placement, params, site_hints, sigmas)
+    chosen = main.assembly
     main, unexplained = _check_walls(_check_refinement(main, params), layouts, params)
     main, conflicting = _check_conflict(main, params)
     main, cut_short = _check_search(main, placement, site_hints, params)
@@ -613,6 +607,9 @@ def place_site(
         # probable room). Putting them to the checks and ranking again was tried: it swapped
         # a right room, doubted for a relaxed refinement, for a wrong one.
         alternatives = [_capped(room, main.assembly.probability) for room in alternatives]
+        # Likewise every assembly found, which the fragments' confidences sum: a doubted
+        # room's fragments are no surer than the room, and no rival reads likelier.
+        assemblies = [_doubted(a, chosen, main.assembly) for a in assemblies]
     slid = 0
     doubted = main.assembly is not None and (
         main.assembly.probability < params.placement.closed_confidence

@@ -39,16 +39,19 @@ from numpy.typing import NDArray
 from scipy import sparse
 
 from schemas.params import PlacementParams
-from services.placement import Piece, rot90
+from services.placement import Piece, PlacementCandidate, rot90
 from services.placement.energy import JunctionNoise, junction_displacement
 from services.placement.evidence import end_voxels, register_ends
 from services.placement.pieces import UNIT
+from services.placement.priors import SiteHints, priors_in_site_frame
 from services.types import FloatArray
 
 __all__ = [
     "Anchor",
     "Refinement",
     "measured_shifts",
+    "placed_cameras",
+    "prior_anchors",
     "refine_translations",
     "stray_anchors",
     "translation_spread",
@@ -344,11 +347,13 @@ def _with_stations(
     first solve brings together chained distinct stations of one room into one), less any
     the solution still leaves apart, as long as it solves as the loop did without;
     ``refined`` itself when none is left."""
+    if refined.status.startswith("fallback"):
+        return refined  # nothing was refined: no camera was made to coincide
     stations = _stations(pieces, rotations, refined.translations, params.station_reach)
     while stations:
         solved = solve(stations)
         if solved.status != refined.status:
-            return refined  # the cameras pull the loop apart: the junctions disagree
+            return refined  # the solver fared otherwise with the station rows: keep the loop's
         kept = [s for s in stations if s.apart(solved.translations) <= params.station_outlier]
         if len(kept) == len(stations):
             return replace(solved, stations=tuple((s.i, s.k) for s in stations))
@@ -361,7 +366,7 @@ def _stations(
 ) -> list[_Station]:
     """Pairs of pieces whose nearest cameras stand within ``reach`` of each other with the
     pieces' sources at ``translations`` (loop order): taken for one station."""
-    cameras = [p.cameras @ rot90(r).T for p, r in zip(pieces, rotations, strict=True)]
+    cameras = placed_cameras(pieces, rotations, np.zeros((len(pieces), 2)))
     out = []
     for i, k in itertools.combinations(range(len(pieces)), 2):
         if not (len(cameras[i]) and len(cameras[k])):
@@ -373,6 +378,33 @@ def _stations(
         if distance[a, b] < reach:
             out.append(_Station(i, cameras[i][a], k, cameras[k][b]))
     return out
+
+
+def placed_cameras(
+    pieces: Sequence[Piece], rotations: Sequence[int], translations: FloatArray
+) -> list[FloatArray]:
+    """Per piece (loop order), (C, 2) its cameras in the site frame with its source at
+    ``translations``."""
+    return [
+        p.cameras @ rot90(r).T + t for p, r, t in zip(pieces, rotations, translations, strict=True)
+    ]
+
+
+def prior_anchors(
+    hints: SiteHints, cand: PlacementCandidate, translations: FloatArray
+) -> list[Anchor | None]:
+    """The prior position of each piece's source in the site frame (loop order; None
+    without a prior), through the hints' frame fitted to the unrefined assembly; none with
+    fewer than two priors (one says where the room is, not how it is shaped)."""
+    if len(hints.priors) < 2:
+        return []
+    rotations = dict(zip(cand.order, cand.rotations, strict=True))
+    sources = {fid: translations[k] for k, fid in enumerate(cand.order)}
+    positions = priors_in_site_frame(hints.priors, rotations, sources)
+    return [
+        Anchor(positions[fid], hints.priors[fid].source_sigma) if fid in positions else None
+        for fid in cand.order
+    ]
 
 
 def translation_spread(

@@ -5,7 +5,7 @@ assembly their cameras, once the loop is refined (which already makes the camera
 station coincide, :mod:`services.refinement`), stand together; in a rival that turns a
 frame a quarter or swaps two of them, the cameras scatter. Each kept assembly of a site of
 RGB-D frames is refined and gets an energy term of its own, the ``stations`` feature: per
-camera, the squared distance to the nearest camera of another frame (at most the station
+camera, the squared distance to the nearest camera of another piece (at most the station
 reach: cameras farther apart are other stations, and cost no more) over twice
 ``station_spread`` squared, weighted by ``station_weight``. The search does not see it (it
 is known only once a loop is refined), so it ranks the assemblies the search kept, as the
@@ -20,8 +20,9 @@ from dataclasses import replace
 import numpy as np
 
 from schemas.params import PlacementParams
-from services.placement import Piece, Placement, PlacementCandidate, rot90, translations_of
-from services.refinement import refine_translations
+from services.placement import Piece, Placement, PlacementCandidate, translations_of
+from services.placement.priors import SiteHints
+from services.refinement import placed_cameras, prior_anchors, refine_translations
 from services.types import FloatArray
 
 __all__ = ["counts_stations", "station_cost", "with_station_cost", "with_station_scored"]
@@ -39,7 +40,7 @@ def station_cost(cameras: Sequence[FloatArray], reach: float, spread: float) -> 
     >>> station_cost([np.zeros((1, 2)), np.array([[5.0, 0.0]])], 0.6, 0.3)
     4.0
     """
-    owners = np.concatenate([np.full(len(c), k) for k, c in enumerate(cameras)])
+    owners = np.concatenate([np.full(len(c), k) for k, c in enumerate(cameras)] + [[]])
     if len(set(owners.tolist())) < 2:
         return 0.0
     points = np.concatenate([c for c in cameras if len(c)])
@@ -50,16 +51,21 @@ def station_cost(cameras: Sequence[FloatArray], reach: float, spread: float) -> 
 
 
 def with_station_cost(
-    placement: Placement, pieces: Sequence[Piece], params: PlacementParams
+    placement: Placement,
+    pieces: Sequence[Piece],
+    params: PlacementParams,
+    hints: SiteHints | None = None,
 ) -> Placement:
     """The placement with every kept closed assembly's energy raised by its ``stations``
     term and the assemblies ranked again (the best's translations recomputed); the same
     placement when fewer than two pieces have cameras, the weight is 0 or no loop closed.
+    The hints' prior poses anchor each refinement, as they do the result's.
     """
     if not placement.closed or not counts_stations(pieces, params):
         return placement
     scored = [
-        with_station_scored(c, pieces, placement.measured, params) for c in placement.candidates
+        with_station_scored(c, pieces, placement.measured, params, hints)
+        for c in placement.candidates
     ]
     ranked = sorted(scored, key=lambda c: c.energy)
     return replace(
@@ -79,24 +85,24 @@ def counts_stations(pieces: Sequence[Piece], params: PlacementParams) -> bool:
 def with_station_scored(
     cand: PlacementCandidate,
     pieces: Sequence[Piece],
-    measured: Mapping[tuple[str, str], float],
+    measured: Mapping[tuple[str, str], float] | None,
     params: PlacementParams,
+    hints: SiteHints | None = None,
 ) -> PlacementCandidate:
     """One candidate with its ``stations`` term counted in (open chains as they are).
 
     measured: the overlaps and gaps the junctions' structure measured
-    (``Placement.measured``), which the refinement uses.
+    (``Placement.measured``), which the refinement uses; None: measured here.
+    hints: their prior poses anchor the refinement.
     """
     if cand.missing:
         return cand
     by_id = {p.id: p for p in pieces}
     ordered = [by_id[fid] for fid in cand.order]
     start = translations_of(pieces, cand)
-    refined = refine_translations(ordered, cand.rotations, start, params, measured)
-    cameras = [
-        p.cameras @ rot90(r).T + t
-        for p, r, t in zip(ordered, cand.rotations, refined.translations, strict=True)
-    ]
+    anchors = prior_anchors(hints, cand, start) if hints is not None else []
+    refined = refine_translations(ordered, cand.rotations, start, params, measured, anchors)
+    cameras = placed_cameras(ordered, cand.rotations, refined.translations)
     cost = station_cost(cameras, params.station_reach, params.station_spread)
     features = {**cand.features, "stations": cost}
     return replace(cand, energy=cand.energy + params.station_weight * cost, features=features)

@@ -766,6 +766,11 @@ def test_a_room_whose_walls_do_not_fit_its_loop_is_not_said_closed():
     assert doubted.confidence == pytest.approx(1e-4)
     assert doubted.alternatives
     assert all(alt.probability <= doubted.confidence for alt in doubted.alternatives)
+    # Nor any assembly found, and its fragments are no surer than the rooms that place them.
+    found = doubted.diagnostics["assemblies"]
+    assert all(a["probability"] <= doubted.confidence for a in found)
+    assert all(f.confidence is not None for f in doubted.fragments)
+    assert all(f.confidence <= len(found) * 1e-4 for f in doubted.fragments if f.confidence)
 
 
 def test_a_room_whose_search_ran_out_of_nodes_is_not_said_closed() -> None:

@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
 
 from schemas.params import PlacementParams
-from services.placement import Piece, place_pieces, rot90
-from services.stations import station_cost, with_station_cost
+from services.placement import Piece, place_pieces, rot90, translations_of
+from services.placement.priors import PiecePrior, SiteHints
+from services.refinement import placed_cameras, prior_anchors, refine_translations
+from services.stations import station_cost, with_station_cost, with_station_scored
 from tests.conftest import chains_from_polygon
 
 pytestmark = pytest.mark.timeout(60)
@@ -73,3 +76,31 @@ def test_a_station_cost_counts_each_camera_to_its_nearest_other_frame() -> None:
     assert station_cost([np.array([[0.0, 0.0], [0.1, 0.0]])], 0.6, 0.3) == 0.0
     near = station_cost([one, np.array([[0.3, 0.0]]), np.array([[3.0, 0.0]])], 0.6, 0.3)
     assert near == pytest.approx(0.5 + 0.5 + 2.0)  # the far camera costs the cap
+
+
+def test_prior_poses_anchor_the_refinement_a_station_term_is_measured_on() -> None:
+    # The result's poses come from a refinement the priors anchor; the cameras the term is
+    # measured on must be those, not an unanchored loop's. A prior 0.3 m off one frame's
+    # source (two of its sigmas: kept, not dropped as a stray) pulls its camera off the
+    # station's.
+    pieces = _frames(STATIONS)
+    placement = place_pieces(pieces)
+    assert placement is not None
+    truth = with_station_cost(placement, pieces, PlacementParams()).best
+    turns = dict(zip(truth.order, truth.rotations, strict=True))
+    offset = {"p1": np.array([0.0, 0.3])}
+    priors = {
+        p.id: PiecePrior(turns[p.id] * math.pi / 2, source + offset.get(p.id, 0.0), 0.15, 0.01)
+        for p, source in zip(pieces, SOURCES, strict=True)
+    }
+    hints = SiteHints(priors=priors)
+    anchored = with_station_scored(truth, pieces, None, PlacementParams(), hints)
+    loose = with_station_scored(truth, pieces, None, PlacementParams())
+    start = translations_of(pieces, truth)
+    refined = refine_translations(
+        pieces, truth.rotations, start, PlacementParams(), None, prior_anchors(hints, truth, start)
+    )
+    cameras = placed_cameras(pieces, truth.rotations, refined.translations)
+    assert not refined.strays[1]
+    assert anchored.features["stations"] == pytest.approx(station_cost(cameras, 0.6, 0.3))
+    assert anchored.features["stations"] > 10 * loose.features["stations"]
