@@ -103,17 +103,21 @@ class EndMatch:
     evidence against a junction: occlusion, clutter that moved, a gap between the scans).
     shift: where b's source lies past a's target along the wall at the best exact fit, m
     (negative: the scans overlap). agreement: the share of both ends' voxels that coincide
-    exactly at that shift.
+    exactly at that shift. bounded: the best shift lies inside the range tried, not at its
+    first or last step.
     """
 
     score: float = 0.0
     shift: float = 0.0
     agreement: float = 0.0
+    bounded: bool = True
 
     @property
     def measured_shift(self) -> float | None:
-        """The shift when the structure pins it down, else None."""
-        return self.shift if self.agreement > _MEASURED_AGREEMENT else None
+        """The shift when the structure pins it down, else None. A best shift at the end of
+        the range is no measurement: agreement still rising there is what structure along
+        the whole wall gives (a corridor's far wall, a long cabinet), whatever the shift."""
+        return self.shift if self.agreement > _MEASURED_AGREEMENT and self.bounded else None
 
 
 def register_ends(a: EndVoxels, b: EndVoxels) -> EndMatch:
@@ -130,9 +134,9 @@ def register_ends(a: EndVoxels, b: EndVoxels) -> EndMatch:
 
     >>> empty = EndVoxels(np.zeros((20, 28, 32), dtype=bool), np.ones(20, bool))
     >>> register_ends(empty, empty)
-    EndMatch(score=0.0, shift=0.0, agreement=0.0)
+    EndMatch(score=0.0, shift=0.0, agreement=0.0, bounded=True)
     """
-    agreement, shift = 0.0, 0.0
+    agreement, best = 0.0, 0
     for step in range(-_SHIFT_BEFORE, _SHIFT_AFTER + 1):
         # b's column c lies at a's column c + step.
         lo, hi = max(0, step), min(_X_CELLS, _X_CELLS + step)
@@ -146,10 +150,11 @@ def register_ends(a: EndVoxels, b: EndVoxels) -> EndMatch:
             continue
         share = 2.0 * int(np.count_nonzero(pa & pb)) / (na + nb)
         if share > agreement:
-            agreement, shift = share, step * _VOXEL
+            agreement, best = share, step
     evidence = float(np.clip((agreement - _CHANCE_AGREEMENT) / _AGREEMENT_SPAN, 0.0, 1.0))
     score = 0.0 - evidence  # not -evidence: no score of -0.0 without evidence
-    return EndMatch(score, float(shift), float(agreement))
+    bounded = -_SHIFT_BEFORE < best < _SHIFT_AFTER
+    return EndMatch(score, float(best * _VOXEL), float(agreement), bounded)
 
 
 def _on_chain(

@@ -9,7 +9,13 @@ import pytest
 
 from schemas.params import PlacementParams
 from services.placement import Piece
-from services.placement.evidence import EndMatch, boundary_mismatch, end_voxels, register_ends
+from services.placement.evidence import (
+    EndMatch,
+    EndVoxels,
+    boundary_mismatch,
+    end_voxels,
+    register_ends,
+)
 from tests.conftest import CEILING, FURNITURE, bare_piece, end_boxes, end_shell
 
 pytestmark = pytest.mark.timeout(120)
@@ -98,6 +104,25 @@ def test_the_same_structure_registers_at_its_shift(shift):
     assert match.score < -0.9
     assert abs(match.shift - shift) <= 0.1 + 1e-9
     assert match.measured_shift == match.shift
+
+
+def _block_at(column: int) -> EndVoxels:
+    """An end seen along its whole grid, with one block of structure in ``column``."""
+    occupied = np.zeros((20, 28, 32), dtype=bool)
+    occupied[column, 5:8, 5:9] = True
+    return EndVoxels(occupied, np.ones(20, dtype=bool))
+
+
+def test_a_best_shift_at_the_end_of_the_range_is_no_measurement():
+    # b's column c lies at a's c + shift: the blocks meet 0.5 m into an overlap (inside the
+    # range), or only at the 0.6 m the range ends with, where agreement still rising would
+    # be as high for structure along the whole wall, whatever the shift.
+    inside = register_ends(_block_at(4), _block_at(9))
+    assert inside.shift == pytest.approx(-0.5) and inside.measured_shift == inside.shift
+    edge = register_ends(_block_at(4), _block_at(10))
+    assert edge.shift == pytest.approx(-0.6) and edge.agreement == 1.0
+    assert not edge.bounded and edge.measured_shift is None
+    assert edge.score == -1.0  # still evidence that the two ends belong together
 
 
 def test_different_structures_are_no_evidence_for_the_junction():
