@@ -40,7 +40,8 @@ def station_cost(cameras: Sequence[FloatArray], reach: float, spread: float) -> 
     >>> station_cost([np.zeros((1, 2)), np.array([[5.0, 0.0]])], 0.6, 0.3)
     4.0
     """
-    owners = np.concatenate([np.full(len(c), k) for k, c in enumerate(cameras)] + [[]])
+    empty = [np.zeros(0, dtype=np.int64)]  # no pieces at all: no owners, cost 0
+    owners = np.concatenate([np.full(len(c), k) for k, c in enumerate(cameras)] + empty)
     if len(set(owners.tolist())) < 2:
         return 0.0
     points = np.concatenate([c for c in cameras if len(c)])

@@ -72,6 +72,7 @@ def test_clouds_and_a_weight_of_nothing_leave_the_placement_as_it_is() -> None:
 
 def test_a_station_cost_counts_each_camera_to_its_nearest_other_frame() -> None:
     one = np.zeros((1, 2))
+    assert station_cost([], 0.6, 0.3) == 0.0  # no pieces at all
     # Two cameras of one frame do not make a station of it.
     assert station_cost([np.array([[0.0, 0.0], [0.1, 0.0]])], 0.6, 0.3) == 0.0
     near = station_cost([one, np.array([[0.3, 0.0]]), np.array([[3.0, 0.0]])], 0.6, 0.3)
