@@ -29,7 +29,7 @@ from rich.table import Table
 from services.synthetic.shapes import OutlineLimits, clean_outline
 from services.types import FloatArray
 
-__all__ = ["DEFAULT_PATH", "house_split", "load_room_shapes", "split_houses"]
+__all__ = ["DEFAULT_PATH", "house_split", "load_room_shapes", "raw_outlines", "split_houses"]
 
 DEFAULT_PATH = Path(__file__).resolve().parents[2] / "shared" / "data" / "room_shapes_mp3d.json"
 Split = Literal["tune", "test"]
@@ -72,6 +72,24 @@ def load_room_shapes(
 def house_split(house: str) -> Split:
     """The set a house belongs to: "tune" or "test", fixed by its id alone."""
     return "tune" if hashlib.sha256(house.encode()).digest()[0] % 2 == 0 else "test"
+
+
+def raw_outlines(path: Path = DEFAULT_PATH, split: Split = "test") -> list[tuple[int, str, Any]]:
+    """(index in the file, house, polygon as the file has it) of one split's entries, in
+    file order, uncleaned: for generators that clean the outlines their own way.
+
+    Raises
+    ------
+    FileNotFoundError
+        When the shapes file is missing.
+    """
+    if not Path(path).exists():
+        raise FileNotFoundError(f"no real room shapes: {path} is missing")
+    return [
+        (index, str(entry["house"]), entry["polygon"])
+        for index, entry in enumerate(json.loads(Path(path).read_text()))
+        if house_split(str(entry["house"])) == split
+    ]
 
 
 def split_houses(houses: Iterable[str]) -> tuple[frozenset[str], frozenset[str]]:

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from bench.room_shapes import DEFAULT_PATH, house_split
+from bench.room_shapes import DEFAULT_PATH, raw_outlines
 
 __all__ = [
     "SYN_KINDS",
@@ -349,19 +349,15 @@ def real_pool(path: Path = DEFAULT_PATH) -> tuple[tuple[int, str, FloatArray], .
     FileNotFoundError
         When the shapes file is missing.
     """
-    if not Path(path).exists():
-        raise FileNotFoundError(f"no real room shapes: {path} is missing")
     pool = []
-    for idx, entry in enumerate(json.loads(Path(path).read_text())):
-        if house_split(str(entry["house"])) != "test":
-            continue
-        V = snap_real(entry["polygon"])
+    for idx, house, polygon in raw_outlines(path):
+        V = snap_real(polygon)
         if V is None or not 4 <= len(V) <= 16:
             continue
         ext = V.max(0) - V.min(0)
         if signed_area(V) < 6.0 or ext.min() < 1.8 or ext.max() > 16.0 or min_edge(V) < 0.3:
             continue
-        pool.append((idx, str(entry["house"]), V))
+        pool.append((idx, house, V))
     return tuple(pool)
 
 

@@ -29,7 +29,7 @@ import open3d as o3d
 from PIL import Image
 
 from bench.outside.clouds import BoolArray, FloatArray, Rng, make_ccw, points_in_poly, signed_area
-from bench.room_shapes import DEFAULT_PATH, house_split
+from bench.room_shapes import DEFAULT_PATH, raw_outlines
 
 __all__ = ["CAMERAS", "KINDS", "make_scene", "real_shapes"]
 
@@ -214,14 +214,7 @@ def real_shapes(path: Path = DEFAULT_PATH) -> tuple[RealShape, ...]:
     FileNotFoundError
         When the shapes file is missing.
     """
-    if not Path(path).exists():
-        raise FileNotFoundError(f"no real room shapes: {path} is missing")
-    entries = json.loads(Path(path).read_text())
-    return tuple(
-        (i, str(e["house"]), snap_real(e["polygon"]))
-        for i, e in enumerate(entries)
-        if house_split(str(e["house"])) == "test"
-    )
+    return tuple((i, house, snap_real(polygon)) for i, house, polygon in raw_outlines(path))
 
 
 def real_polygon(rng: Rng, shapes: tuple[RealShape, ...]) -> tuple[FloatArray, str, int]:

@@ -8,7 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.room_shapes import DEFAULT_PATH, house_split, load_room_shapes, split_houses
+from bench.room_shapes import (
+    DEFAULT_PATH,
+    house_split,
+    load_room_shapes,
+    raw_outlines,
+    split_houses,
+)
 from services.geometry import signed_area
 from services.synthetic.shapes import is_simple_rectilinear
 
@@ -65,3 +71,20 @@ def test_real_shapes_load() -> None:
     assert len(tune) >= 10 and len(test) >= 10
     on_tune = load_room_shapes(houses=tune)
     assert {h for h, _ in on_tune} == tune
+
+
+def test_raw_outlines_keep_the_files_index_and_polygon_of_one_split(tmp_path: Path) -> None:
+    houses = ["a", "e", "b", "f"]  # two of each split
+    entries = [
+        {"house": h, "polygon": [[0, 0], [k + 1, 0], [k + 1, 1]]} for k, h in enumerate(houses)
+    ]
+    path = tmp_path / "shapes.json"
+    path.write_text(json.dumps(entries))
+    tested = [
+        (k, h, entries[k]["polygon"]) for k, h in enumerate(houses) if house_split(h) == "test"
+    ]
+    assert [k for k, _, _ in tested] == [1, 3]
+    assert raw_outlines(path) == tested
+    assert len(raw_outlines(path, "tune")) == len(houses) - len(tested)
+    with pytest.raises(FileNotFoundError, match="is missing"):
+        raw_outlines(tmp_path / "none.json")
