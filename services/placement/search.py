@@ -388,6 +388,9 @@ class _State:
     drift_vars: FloatArray
     owners: NDArray[np.intp]  # (S,) each sample's piece's place in the order (priors only)
     box: Box  # their bounds (x_lo, y_lo, x_hi, y_hi)
+    # (m, 4) each placed piece's free-space box (x_lo, y_lo, x_hi, y_hi) at its source: the
+    # conflict test's first filter, kept as the loop grows rather than gathered per child.
+    free_at: FloatArray
     violated: tuple[int, ...] = ()  # indices of broken hint pairs
     resolved: frozenset[int] = frozenset()  # hint pairs already decided
     # The priors' costs per quarter turn q of the frame: the frame estimate takes its turn
@@ -452,7 +455,8 @@ def _conflict(
     rooms, refitted weights or not (README, *Accuracy and speed*).
     """
     hits = 0
-    shifts, margins = np.zeros((len(state.order), 2)), np.zeros(len(state.order))
+    at, free_at, margins = state.sources, state.free_at, np.zeros(len(state.order))
+    shifts = None
     if search.frame is not None:
         # Each placed piece relative to j: moved by the mean drift between them, and its
         # walls or free space counted only beyond a margin of that drift's spread.
@@ -460,23 +464,24 @@ def _conflict(
         shifts = state.drift_means - mean_j
         spread = np.sqrt(np.maximum(var_j - state.drift_vars, 0.0).max(axis=1))
         margins = search.params.conflict_drift_sigmas * spread
+        at = state.sources + shifts
+        free_at = search.free_boxes[state.order, state.rotations] + np.tile(at, 2)
     # j's walls in the placed pieces' free spaces: only those whose box meets j's walls'
     # (the test of _meets, all pieces at once).
-    at = state.sources + shifts
-    free_boxes = search.free_boxes[state.order, state.rotations]
     x0, y0, x1, y1 = box
-    meets = (x0 <= free_boxes[:, 2] + at[:, 0]) & (x1 >= free_boxes[:, 0] + at[:, 0])
-    meets &= (y0 <= free_boxes[:, 3] + at[:, 1]) & (y1 >= free_boxes[:, 1] + at[:, 1])
+    meets = (x0 <= free_at[:, 2]) & (x1 >= free_at[:, 0])
+    meets &= (y0 <= free_at[:, 3]) & (y1 >= free_at[:, 1])
     for k in np.flatnonzero(meets).tolist():
         free = search.pieces[state.order[k]].rotated_free[state.rotations[k]]
         hits += free.hits(samples - at[k], float(margins[k]))
     free = search.pieces[j].rotated_free[rotation]
     placed_samples = state.samples
     placed_margins: FloatArray | float = 0.0  # a float: the plain free-cell test
-    if search.frame is not None:
+    pad = 0.0  # how far a placed sample moves at most
+    if shifts is not None:
         placed_samples = state.samples + shifts[state.owners]
         placed_margins = margins[state.owners]
-    pad = float(np.abs(shifts).max())  # how far a placed sample moves at most
+        pad = float(np.abs(shifts).max())
     x0, y0, x1, y1 = state.box
     if _meets((x0 - pad, y0 - pad, x1 + pad, y1 + pad), free.box, state.end):
         hits += free.hits(placed_samples - state.end, placed_margins)
@@ -549,6 +554,7 @@ def _extend(
     x0, y0, x1, y1 = piece.sample_boxes[rotation]
     ex, ey = state.end.tolist()
     box = (x0 + ex, y0 + ey, x1 + ex, y1 + ey)
+    box_shift = (ex, ey, ex, ey)
     drift = (drift_mean, drift_var)
     features[_F["conflict"]] += _conflict(search, state, j, rotation, samples, box, drift)
     rotations_cost = state.rotation_prior + search.turned_rotation_cost[j, rotation]
@@ -568,7 +574,7 @@ def _extend(
     child = _State(
         order=(*state.order, j),
         rotations=(*state.rotations, rotation),
-        sources=np.vstack([state.sources, state.end]),
+        sources=np.concatenate([state.sources, state.end[None]]),
         end=pts[-1],
         heading=(piece.directions[-1] + rotation) % 4,
         turning=state.turning + turn + piece.turning,
@@ -582,6 +588,7 @@ def _extend(
         drift_vars=drift_vars,
         owners=owners,
         box=_union(state.box, box),
+        free_at=np.concatenate([state.free_at, [search.free_boxes[j, rotation] + box_shift]]),
         violated=state.violated,
         resolved=state.resolved,
         rotation_prior=rotations_cost,
@@ -1109,6 +1116,7 @@ def _root(search: _Search) -> _State:
         drift_vars=np.zeros((1, 2)),
         owners=np.zeros(len(samples), dtype=np.intp),
         box=first.sample_boxes[0],
+        free_at=search.free_boxes[0, 0][None].copy(),  # the first source is the origin
         rotation_prior=rotation_prior,
         anchors=tuple(
             a for a in (_anchor(search, 0, np.zeros(2), np.zeros(2), np.zeros(2)),) if a is not None
