@@ -82,6 +82,7 @@ _DFS_GROUP = 8  # children the depth-first search places at once (see _dfs)
 _LOOKAHEAD = 2  # pieces left after a child when its bound tries every way to finish (<= 2)
 _TOUR_PIECES = 16  # up to this many pieces the bounds hold the cheapest tour (2^15 x 16 x 4 table)
 _F = {name: k for k, name in enumerate(FEATURES)}
+_XYXY = np.array([0, 1, 0, 1])  # a position's columns in the order of a box's
 # A junction's turn from the quarter turns between the headings it joins (mod 4); 2 folds
 # back, which no loop has.
 _TURN_OF = np.array([0, 1, 2, -1])
@@ -465,7 +466,7 @@ def _conflict(
         spread = np.sqrt(np.maximum(var_j - state.drift_vars, 0.0).max(axis=1))
         margins = search.params.conflict_drift_sigmas * spread
         at = state.sources + shifts
-        free_at = search.free_boxes[state.order, state.rotations] + np.tile(at, 2)
+        free_at = search.free_boxes[state.order, state.rotations] + at[:, _XYXY]
     # j's walls in the placed pieces' free spaces: only those whose box meets j's walls'
     # (the test of _meets, all pieces at once).
     x0, y0, x1, y1 = box
@@ -568,8 +569,8 @@ def _extend(
         features[_F["prior"]] = float((rotations_cost + position).min())
     drift_means, drift_vars, owners = state.drift_means, state.drift_vars, state.owners
     if search.frame is not None:  # only the priors' conflict test reads them
-        drift_means = np.vstack([drift_means, drift_mean])
-        drift_vars = np.vstack([drift_vars, drift_var])
+        drift_means = np.concatenate([drift_means, drift_mean[None]])
+        drift_vars = np.concatenate([drift_vars, drift_var[None]])
         owners = np.concatenate([owners, np.full(len(samples), len(state.order))])
     child = _State(
         order=(*state.order, j),
