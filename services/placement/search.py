@@ -390,7 +390,8 @@ class _State:
     owners: NDArray[np.intp]  # (S,) each sample's piece's place in the order (priors only)
     box: Box  # their bounds (x_lo, y_lo, x_hi, y_hi)
     # (m, 4) each placed piece's free-space box (x_lo, y_lo, x_hi, y_hi) at its source: the
-    # conflict test's first filter, kept as the loop grows rather than gathered per child.
+    # conflict test's first filter without prior poses (with them the boxes move with the
+    # drift), kept as the loop grows rather than gathered per child.
     free_at: FloatArray
     violated: tuple[int, ...] = ()  # indices of broken hint pairs
     resolved: frozenset[int] = frozenset()  # hint pairs already decided

@@ -918,6 +918,23 @@ def test_with_priors_free_space_forgives_the_drift_the_junctions_explain(gap):
         assert forgiving.features["conflict"] > 10.0
 
 
+def test_the_state_keeps_each_placed_free_space_box_at_its_source():
+    # The conflict test reads the placed pieces' free-space boxes from the state, kept as
+    # the loop grows: each must be its piece's box at that turn, moved to its source.
+    cuts = [1.5 + 3.0 * k for k in range(12)]
+    pieces = chains_from_polygon(HALL, cuts, [0, 1, 2, 3] * 3)
+    pieces = [_hall_piece(p, point_at_arc(HALL, c), 0.2) for p, c in zip(pieces, cuts, strict=True)]
+    search = search_module._Search(pieces, UNTUNED, SiteHints(), True)
+    turns = [(-k) % 4 for k in (0, 1, 2, 3) * 3]  # undo each chain's quarter turns
+    state = search_module._placed_loop(search, list(range(12)), turns)
+    assert state is not None and len(state.order) == 12
+    placed = zip(state.order, state.rotations, strict=True)
+    boxes = [pieces[j].rotated_free[r].box for j, r in placed]
+    moved = np.array(boxes) + np.tile(state.sources, 2)
+    assert np.array_equal(state.free_at, moved)
+    assert np.isfinite(state.free_at).all()
+
+
 @pytest.mark.parametrize("use_outside", [True, False])
 def test_floor_seen_outside_breaks_the_tie_of_two_rooms(l_room, use_outside):
     # The tied L room's swapped assembly leaves floor a scan saw outside its walls.
