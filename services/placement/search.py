@@ -31,6 +31,7 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import InitVar, dataclass, field, replace
 from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -79,6 +80,7 @@ _CLOSURE_DIRECTIONS = np.array(
 _AWAY_FROM_START = -_CLOSURE_DIRECTIONS.T  # an end's distance from the start along each u
 _BROADENING = (1, 2, 3)  # children per node in the search's quick first passes
 _DFS_GROUP = 8  # children the depth-first search places at once (see _dfs)
+_BEAM_SPARE = 32  # children tested beyond what a beam layer still takes (crossing, a key seen)
 _LOOKAHEAD = 2  # pieces left after a child when its bound tries every way to finish (<= 2)
 _TOUR_PIECES = 16  # up to this many pieces the bounds hold the cheapest tour (2^15 x 16 x 4 table)
 _F = {name: k for k, name in enumerate(FEATURES)}
@@ -172,6 +174,9 @@ class _Search:
     prior_variance: FloatArray = field(init=False)
     has_prior: np.ndarray = field(init=False)
     free_boxes: FloatArray = field(init=False)  # [j, r]: (4,) piece j's free space's box
+    # [j, r]: (W, 4) piece j's walls at rotation r (walls_of), rows past its count all NaN
+    wall_table: FloatArray = field(init=False)
+    wall_count: NDArray[np.intp] = field(init=False)  # [j]: piece j's walls
     top: list[tuple[float, int, PlacementCandidate]] = field(default_factory=list)
     breadth: int | None = None
     lowest: float = np.inf  # energy of the best leaf so far
@@ -226,6 +231,9 @@ class _Search:
         self.free_boxes = np.array(
             [[p.rotated_free[r].box for r in range(4)] for p in self.pieces]
         ).reshape(-1, 4, 4)
+        self.wall_table = _padded([walls for p in self.pieces for _, walls, _ in p.rotated])
+        self.wall_table = self.wall_table.reshape(n, 4, *self.wall_table.shape[1:])
+        self.wall_count = np.array([len(p.rotated[0][1]) for p in self.pieces], dtype=np.intp)
 
     def pair_evidence(self, led: Sequence[int]) -> _PairEvidence:
         """The pair evidence of the pieces ``led`` (indices), in that order."""
@@ -421,6 +429,59 @@ def _crosses(new: FloatArray, placed: FloatArray) -> bool:
     return bool(np.where(axis == p_axis, overlapping, crossing).any())
 
 
+def _padded(rows: Sequence[FloatArray]) -> FloatArray:
+    """(len(rows), R, 4): the wall arrays stacked, each padded with NaN rows to the
+    longest (a NaN wall compares false: it crosses nothing and nothing crosses it)."""
+    out = np.full((len(rows), max((len(r) for r in rows), default=0), 4), np.nan)
+    for k, r in enumerate(rows):
+        out[k, : len(r)] = r
+    return out
+
+
+class _Placed(NamedTuple):
+    """A batch of states' placed walls, (K, P, 4) padded with NaN rows, and ends (K, 2)."""
+
+    walls: FloatArray
+    ends: FloatArray
+
+    @classmethod
+    def of(cls, states: Sequence[_State]) -> _Placed:
+        ends = np.array([s.end for s in states]).reshape(-1, 2)
+        return cls(_padded([s.walls for s in states]), ends)
+
+
+def _children_walls(
+    search: _Search,
+    placed: _Placed,
+    parent: NDArray[np.intp],
+    piece: NDArray[np.intp],
+    rotation: NDArray[np.intp],
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """:func:`_crosses` for many children at once: child c places piece[c] at rotation[c]
+    after the state ``parent[c]`` of ``placed``. Returns (C, W, 4) each child's walls where
+    it lies (NaN rows past the piece's count; the same numbers as ``shift_walls``) and (C,)
+    whether they cross their parent's placed walls. One set of array operations instead of
+    one per child: the test's cost is mostly per call."""
+    ends = placed.ends[parent]
+    new = search.wall_table[piece, rotation]  # (C, W, 4)
+    along_x = new[:, :, 0] == 0.0
+    sx, sy = ends[:, 0:1], ends[:, 1:2]
+    walls = new.copy()
+    walls[:, :, 1] += np.where(along_x, sy, sx)
+    run = np.where(along_x, sx, sy)
+    walls[:, :, 2] += run
+    walls[:, :, 3] += run
+    others = placed.walls[parent]  # (C, P, 4)
+    axis, offset, lo, hi = (walls[:, :, k, None] for k in range(4))  # (C, W, 1) each
+    p_axis, p_offset, p_lo, p_hi = (others[:, None, :, k] for k in range(4))  # (C, 1, P)
+    crossing = (p_offset > lo + _CROSS_EPS) & (p_offset < hi - _CROSS_EPS)
+    crossing &= (offset > p_lo + _CROSS_EPS) & (offset < p_hi - _CROSS_EPS)
+    overlap = np.minimum(hi, p_hi) - np.maximum(lo, p_lo)
+    overlapping = (np.abs(offset - p_offset) < 2 * _CROSS_EPS) & (overlap > _CROSS_EPS)
+    crosses = np.where(axis == p_axis, overlapping, crossing).any(axis=(1, 2))
+    return walls, np.asarray(crosses, dtype=bool)
+
+
 def _trim_start(walls: FloatArray, start: FloatArray, length: float) -> FloatArray:
     """Shorten the loop's first wall at its start: the closing piece may overshoot it by
     up to ``length`` (neighbouring scans overlap) without counting as a crossing."""
@@ -531,18 +592,25 @@ def _resolve_pairs(
 
 
 def _extend(
-    search: _Search, state: _State, j: int, turn: int, position: FloatArray | None = None
+    search: _Search,
+    state: _State,
+    j: int,
+    turn: int,
+    position: FloatArray | None = None,
+    walls: FloatArray | None = None,
 ) -> _State | None:
     """The state with piece j appended after a junction that turns by ``turn``, or None
     when its walls would cross the placed ones. ``position``: the child's position costs
-    when already known (:func:`_children`)."""
+    when already known (:func:`_children`); ``walls``: the child's walls where it lies,
+    when already known to cross nothing (:func:`_children_walls`)."""
     piece = search.pieces[j]
     rotation = (state.heading + turn - piece.directions[0]) % 4
     local_pts, local_walls, local_samples = piece.rotated[rotation]
     pts = local_pts + state.end
-    walls = shift_walls(local_walls, state.end)
-    if _crosses(walls, state.walls):
-        return None
+    if walls is None:
+        walls = shift_walls(local_walls, state.end)
+        if _crosses(walls, state.walls):
+            return None
     samples = local_samples + state.end
     heading_out = (piece.directions[0] + rotation) % 4
     mean, var = search.step[state.heading, heading_out]
@@ -718,25 +786,40 @@ def _beam(search: _Search, root: _State, width: int) -> None:
     for _ in range(1, len(search.pieces)):
         children = _children(search, layer)
         ranked = np.lexsort((children.turn, children.piece, children.parent, children.bound))
-        bounds, parents = children.bound.tolist(), children.parent.tolist()
+        parents = children.parent.tolist()
         pieces, turns = children.piece.tolist(), children.turn.tolist()
         headings = children.heading.tolist()
         ends = np.round(children.end, 1).tolist()
         states, layer = layer, []
         seen: set[tuple[object, ...]] = set()
-        for c in ranked.tolist():
-            if len(layer) >= width or bounds[c] >= search.threshold() or search.out_of_budget():
+        # The threshold does not move while a layer is laid (no leaf is recorded); the
+        # children's walls are tested in chunks of about as many as the layer still takes.
+        ranked = ranked[children.bound[ranked] < search.threshold()]
+        walls, crosses, first, checked = np.empty((0, 0, 4)), np.empty(0, dtype=bool), 0, 0
+        placed = _Placed.of(states)
+        for i, c in enumerate(ranked.tolist()):
+            if len(layer) >= width or search.out_of_budget():
                 break
             search.nodes += 1
             state, j = states[parents[c]], pieces[c]
             key = (frozenset((*state.order, j)), j, headings[c], *ends[c])
             if key in seen:
                 continue  # known before paying for its geometry
+            if i >= checked:
+                chunk = ranked[i : i + width - len(layer) + _BEAM_SPARE]
+                walls, crosses = _children_walls(
+                    search, placed, children.parent[chunk], children.piece[chunk],
+                    children.rotation[chunk],
+                )  # fmt: skip
+                first, checked = i, i + len(chunk)
+            if crosses[i - first]:
+                continue
             position = None if children.position is None else children.position[c]
-            child = _extend(search, state, j, turns[c], position)
-            if child is not None:
-                seen.add(key)
-                layer.append(child)
+            own = walls[i - first, : search.wall_count[j]]
+            child = _extend(search, state, j, turns[c], position, own)
+            assert child is not None  # its walls cross nothing
+            seen.add(key)
+            layer.append(child)
     for state in layer:
         _close(search, state)
 

@@ -19,7 +19,7 @@ from services.placement import (
     translations_of,
 )
 from services.placement import search as search_module
-from services.placement.pieces import FreeSpace
+from services.placement.pieces import FreeSpace, shift_walls
 from services.placement.priors import HintPair, PiecePrior, position_costs_batch
 from tests.conftest import UNTUNED, bare_piece, chains_from_polygon, point_at_arc
 
@@ -607,6 +607,48 @@ def test_placing_siblings_together_changes_no_step_of_the_search(monkeypatch, l_
         assert placement is not None
         assert placement.nodes_searched == first.nodes_searched
         assert placement.candidates == first.candidates
+
+
+def test_the_beams_wall_test_is_each_childs_own():
+    # The beam tests its children's walls many at once: each child's walls and verdict
+    # must be those of shift_walls and _crosses alone, to the last bit, crossing or not.
+    pieces = _comb_pieces(9)
+    search = search_module._Search(pieces, GEOMETRY, SiteHints(), True)
+    states = [search_module._root(search)]
+    for _ in range(3):  # a few layers of states of different lengths
+        children = search_module._children(search, states[-4:])
+        for c in range(0, len(children.piece), 5):
+            parent = states[-4:][int(children.parent[c])]
+            child = search_module._extend(
+                search, parent, int(children.piece[c]), int(children.turn[c])
+            )
+            if child is not None:
+                states.append(child)
+    children = search_module._children(search, states)
+    placed = search_module._Placed.of(states)
+    walls, crosses = search_module._children_walls(
+        search, placed, children.parent, children.piece, children.rotation
+    )
+    for c in range(len(children.piece)):
+        state, j = states[int(children.parent[c])], int(children.piece[c])
+        own = shift_walls(pieces[j].rotated[int(children.rotation[c])][1], state.end)
+        assert np.array_equal(walls[c, : search.wall_count[j]], own)
+        assert np.isnan(walls[c, search.wall_count[j] :]).all()
+        assert crosses[c] == search_module._crosses(own, state.walls)
+    assert 0 < crosses.sum() < len(crosses)
+
+
+@pytest.mark.parametrize("spare", [0, 1, 500])
+def test_the_beams_chunks_change_no_step_of_the_search(monkeypatch, spare):
+    # However many children the beam tests at once, it lays the same layers.
+    pieces = _comb_pieces(10)
+    params = GEOMETRY.model_copy(update={"beam_width": 40, "max_search_nodes": 3000})
+    first = place_pieces(pieces, params)
+    monkeypatch.setattr(search_module, "_BEAM_SPARE", spare)
+    again = place_pieces(pieces, params)
+    assert first is not None and again is not None
+    assert again.nodes_searched == first.nodes_searched
+    assert again.candidates == first.candidates
 
 
 @pytest.mark.parametrize("with_priors", [False, True])
