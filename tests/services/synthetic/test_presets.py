@@ -111,7 +111,8 @@ def test_world_preset() -> None:
     assert world.cut_model == "arc" and world.shape_family == "mixed"
     assert world.gap_range == (-0.5, 0.3) and world.end_margin == 0.0
     assert world.n_fragments_range == (2, 16) and world.outlier_fraction == 0.02
-    assert world.reach_beyond[0] >= 0.5 and world.clutter == 1.5
+    assert world.reach_beyond == (0.0, 1.0) and world.clutter == 1.5
+    assert world.floor_reach_range == (1.0, 4.0)
     with pytest.raises(ValueError):
         replace(world, gap_range=(-1.0, 0.3))  # an overlap as long as a whole stretch
     with pytest.raises(ValueError):
