@@ -418,15 +418,22 @@ def _crosses(new: FloatArray, placed: FloatArray) -> bool:
     """True when a new wall crosses or overlaps a placed one (touching is allowed)."""
     if len(placed) == 0 or len(new) == 0:
         return False
-    axis, offset, lo, hi = new.T[:, :, None]  # (W, 1) each, against (P,) placed
-    p_axis, p_offset, p_lo, p_hi = placed.T
+    return bool(_crossing(new.T[:, :, None], placed.T).any())  # (W, 1) against (P,)
+
+
+def _crossing(new: FloatArray, placed: FloatArray) -> NDArray[np.bool_]:
+    """Which new walls cross or overlap which placed ones: ``new`` and ``placed`` hold
+    (axis, offset, lo, hi) along their first dimension, the rest broadcast together."""
+    axis, offset, lo, hi = new
+    p_axis, p_offset, p_lo, p_hi = placed
     # Perpendicular: each wall's line passes strictly inside the other's run.
     crossing = (p_offset > lo + _CROSS_EPS) & (p_offset < hi - _CROSS_EPS)
     crossing &= (offset > p_lo + _CROSS_EPS) & (offset < p_hi - _CROSS_EPS)
     # Parallel: on one line, their runs overlapping by more than touching.
     overlap = np.minimum(hi, p_hi) - np.maximum(lo, p_lo)
     overlapping = (np.abs(offset - p_offset) < 2 * _CROSS_EPS) & (overlap > _CROSS_EPS)
-    return bool(np.where(axis == p_axis, overlapping, crossing).any())
+    out: NDArray[np.bool_] = np.where(axis == p_axis, overlapping, crossing)
+    return out
 
 
 def _padded(rows: Sequence[FloatArray]) -> FloatArray:
@@ -472,14 +479,9 @@ def _children_walls(
     walls[:, :, 2] += run
     walls[:, :, 3] += run
     others = placed.walls[parent]  # (C, P, 4)
-    axis, offset, lo, hi = (walls[:, :, k, None] for k in range(4))  # (C, W, 1) each
-    p_axis, p_offset, p_lo, p_hi = (others[:, None, :, k] for k in range(4))  # (C, 1, P)
-    crossing = (p_offset > lo + _CROSS_EPS) & (p_offset < hi - _CROSS_EPS)
-    crossing &= (offset > p_lo + _CROSS_EPS) & (offset < p_hi - _CROSS_EPS)
-    overlap = np.minimum(hi, p_hi) - np.maximum(lo, p_lo)
-    overlapping = (np.abs(offset - p_offset) < 2 * _CROSS_EPS) & (overlap > _CROSS_EPS)
-    crosses = np.where(axis == p_axis, overlapping, crossing).any(axis=(1, 2))
-    return walls, np.asarray(crosses, dtype=bool)
+    # (C, W, 1) against (C, 1, P)
+    crosses = _crossing(walls.transpose(2, 0, 1)[..., None], others.transpose(2, 0, 1)[:, :, None])
+    return walls, np.asarray(crosses.any(axis=(1, 2)), dtype=bool)
 
 
 def _trim_start(walls: FloatArray, start: FloatArray, length: float) -> FloatArray:
