@@ -470,10 +470,9 @@ def _children_walls(
     whether they cross their parent's placed walls. One set of array operations instead of
     one per child: the test's cost is mostly per call."""
     ends = placed.ends[parent]
-    new = search.wall_table[piece, rotation]  # (C, W, 4)
-    along_x = new[:, :, 0] == 0.0
+    walls = search.wall_table[piece, rotation]  # (C, W, 4), a copy (fancy indexing)
+    along_x = walls[:, :, 0] == 0.0
     sx, sy = ends[:, 0:1], ends[:, 1:2]
-    walls = new.copy()
     walls[:, :, 1] += np.where(along_x, sy, sx)
     run = np.where(along_x, sx, sy)
     walls[:, :, 2] += run
