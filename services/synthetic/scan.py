@@ -24,6 +24,7 @@ __all__ = ["ScanStyle", "Stretch", "sample_scan", "stretch_keypoints"]
 BoolArray = NDArray[np.bool_]
 _PILOT_DENSITY = 30.0  # points per m², to measure the visible area before the real pass
 _SCANNER_HEIGHT = 1.5
+_VIEW_DEPTH = 1.5  # m, a scanner's distance from a door: the view past it widens by far / this
 
 
 @dataclass(frozen=True)
@@ -45,6 +46,8 @@ class ScanStyle:
     scanner_spacing: one scanner position per this many meters of stretch.
     patch_gain: density factor inside one random sphere of 0.5-1.5 m radius (1 for none).
     see_through: also sample the floor beyond the doors.
+    far_walls: with ``see_through``, the share of doors through which the scan also sees the
+    next room's wall facing the door.
     oversample: candidates drawn per kept point before density thinning.
     beyond: floor, ceiling and furniture are seen in front of the stretch grown by this much
     along the loop at both ends, m (walls only on the stretch itself).
@@ -58,6 +61,7 @@ class ScanStyle:
     see_through: bool
     oversample: float
     beyond: float = 0.0
+    far_walls: float = 0.0
 
 
 def stretch_keypoints(room: Room, stretch: Stretch) -> FloatArray:
@@ -215,7 +219,29 @@ def _across(
     elif style.see_through:
         beyond = float(rng.uniform(0.5, 2.0))
         parts.append(_rect(rng, corner + depth * out, width, beyond * out, density))
+        if style.far_walls > 0.0 and rng.random() < style.far_walls:
+            parts.append(_far_wall(rng, room, corner + depth * out, width, out, density))
     return parts
+
+
+def _far_wall(
+    rng: np.random.Generator,
+    room: Room,
+    mouth: FloatArray,
+    width: FloatArray,
+    out: FloatArray,
+    density: float,
+) -> FloatArray:
+    """The next room's wall facing a door, seen through it: parallel to the door's wall,
+    1-3 m behind it, whole height, and wider than the door the farther it stands (the view
+    widens past the jambs). ``mouth``: the door's outer corner at the floor; ``width``: the
+    door (its piece on the stretch) along its wall. Nothing inside the room itself."""
+    far = float(rng.uniform(1.0, 3.0))
+    spread = 0.5 * far / _VIEW_DEPTH * width  # past each jamb
+    wall = _rect(
+        rng, mouth + far * out - spread, width + 2 * spread, [0.0, 0.0, room.height], density
+    )
+    return wall[~points_in_polygon(wall[:, :2], room.polygon)]
 
 
 def _visible_intervals(room: Room, e: int, stretch: Stretch) -> list[tuple[float, float]]:

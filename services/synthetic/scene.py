@@ -69,7 +69,9 @@ class SceneSpec:
     carved, long thin, L, T, U, comb and notched; :mod:`services.synthetic.families`).
     reach_beyond: per-fragment extra floor, ceiling and furniture seen past both ends of
     the stretch along the loop, m (neighbours then share floor and furniture even across a
-    gap). transient_clutter: per-fragment objects seen by that scan only (people, carts,
+    gap). far_walls: with ``see_through``, the share of doors through which a scan also
+    sees the next room's wall facing the door (1-3 m behind it, wider than the door).
+    transient_clutter: per-fragment objects seen by that scan only (people, carts,
     boxes), per 4 m of stretch. max_scene_points: when > 0, point counts are scaled down so
     that n fragments times the largest count stays within it.
     """
@@ -87,6 +89,7 @@ class SceneSpec:
     clutter: float = 1.0
     openings: bool = True
     see_through: bool = False
+    far_walls: float = 0.0
     ceiling_fraction: _Range = (0.0, 0.6)
     floor_reach_range: _Range = (2.0, 4.0)
     gap_range: _Range = (-0.3, 0.3)
@@ -127,6 +130,8 @@ class SceneSpec:
         ranges = (self.reach_beyond, self.transient_clutter)
         if any(lo > hi or lo < 0.0 for lo, hi in ranges) or self.max_scene_points < 0:
             raise ValueError("reach_beyond and transient_clutter are (low, high) >= 0")
+        if not 0.0 <= self.far_walls <= 1.0:
+            raise ValueError("far_walls is a share of the doors, in [0, 1]")
         if self.min_stretch <= 0.0 or -self.gap_range[0] >= self.min_stretch:
             raise ValueError("min_stretch must be > 0 and longer than the largest overlap")
 
@@ -189,7 +194,8 @@ class SceneSpec:
         (benchmarks set ``n_fragments_range`` per bucket) from scanners that differ in noise,
         density, reach and clutter. A scan sees from nothing to 1 m of floor and furniture
         past its stretch's ends, so neighbours may share no more than the wall they overlap
-        on (scenes made elsewhere share 0.2 m, median), and its floor 1 to 4 m deep. Point
+        on (scenes made elsewhere share 0.2 m, median), and its floor 1 to 4 m deep; through
+        half the doors it sees the next room's far wall. Point
         counts shrink for many fragments (at most 1.2 M points per scene)."""
         return cls(
             size_range=((2.0, 5.0), (18.0, 20.0)),
@@ -214,6 +220,7 @@ class SceneSpec:
             min_stretch=1.0,
             shape_family="mixed",
             reach_beyond=(0.0, 1.0),
+            far_walls=0.5,
             transient_clutter=(0.0, 1.0),
             max_scene_points=1_200_000,
         )
@@ -533,6 +540,7 @@ def _scan_style(rng: np.random.Generator, spec: SceneSpec) -> ScanStyle:
         scanner_spacing=spec.scanner_spacing,
         patch_gain=float(rng.uniform(*spec.patch_gain_range)),
         see_through=spec.see_through,
+        far_walls=spec.far_walls,
         oversample=spec.oversample,
     )
     if spec.reach_beyond[1] > 0.0:

@@ -113,6 +113,9 @@ def test_world_preset() -> None:
     assert world.n_fragments_range == (2, 16) and world.outlier_fraction == 0.02
     assert world.reach_beyond == (0.0, 1.0) and world.clutter == 1.5
     assert world.floor_reach_range == (1.0, 4.0)
+    assert world.see_through and world.far_walls == 0.5
+    with pytest.raises(ValueError):
+        replace(world, far_walls=1.5)
     with pytest.raises(ValueError):
         replace(world, gap_range=(-1.0, 0.3))  # an overlap as long as a whole stretch
     with pytest.raises(ValueError):

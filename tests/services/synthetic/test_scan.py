@@ -74,3 +74,20 @@ def test_an_opening_across_a_stretch_end_is_seen_in_part_from_each_side():
         # No wall inside the window's hole.
         wall = points[(np.abs(points[:, 1]) < 1e-9) & (points[:, 2] > 0.95) & (points[:, 2] < 1.95)]
         assert not np.any((wall[:, 0] > 4.5) & (wall[:, 0] < 5.8))
+
+
+def test_through_a_door_a_scan_may_see_the_next_rooms_far_wall():
+    # A door from t = 2.0 to 2.9 m on the bottom wall (outward is -y), on the left stretch.
+    door = Opening(edge=0, t0=2.0, t1=2.9, z0=0.0, z1=2.0)
+    furnishing = Furnishing(openings=(door,), wall_thickness=0.2)
+    seeing = ScanStyle(**{**STYLE.__dict__, "see_through": True})
+    without = scan(LEFT, seeing, furnishing)
+    assert np.all(without[:, 1] >= -2.2 - 1e-9), "only the floor 0.5-2 m past the door"
+    points = scan(LEFT, ScanStyle(**{**seeing.__dict__, "far_walls": 1.0}), furnishing)
+    far = points[points[:, 1] < -1.2 + 1e-9]  # 1-3 m past the door's outer face
+    wall = far[far[:, 2] > 1e-9]
+    assert len(wall) > 200
+    depth = np.unique(np.round(wall[:, 1], 9))
+    assert len(depth) == 1 and -3.2 - 1e-9 <= depth[0] <= -1.2 + 1e-9, "one plane"
+    assert wall[:, 2].max() > 2.3, "the whole height, not the door's"
+    assert wall[:, 0].min() < 2.0 and wall[:, 0].max() > 2.9, "wider than the door"

@@ -226,6 +226,7 @@ ACROSS = replace(
     clutter=3.0,
     reach_beyond=(0.0, 0.0),
     transient_clutter=(0.0, 0.0),
+    far_walls=0.0,  # the next rooms' walls seen through doors: test_scan.py
 )
 L_OUTLINE = np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], dtype=np.float64)
 
