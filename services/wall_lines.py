@@ -69,6 +69,9 @@ _MIN_HIDDEN_WALL = 0.6  # m, least wall seen only over tall furniture a wall's e
 _LINTEL_BINS = 3  # height bins a column seen only high up must hold to count as wall
 _LINTEL_LOW = 1.6  # m over the floor: a column whose wall points all stand higher is wall over
 # an opening (a lintel) or over tall furniture (wardrobes, shelves, fridges: 1.6 m and up)
+_SEEN_THROUGH_REACH = 5.0  # m, farthest behind a wall's opening the next room's wall is taken
+_SEEN_OPENING_CELLS = 3  # cells of opening (and of whole wall) a wall seen through one shows
+_WINDOW_HEIGHT = 0.5  # m, least gap in a column's wall under wall seen over _LINTEL_LOW: a window
 
 
 @dataclass(frozen=True)
@@ -87,8 +90,8 @@ class WallLine:
     seen_through: (C,) bool or None: cells with no evidence where space was scanned behind
     the line as well as in front (None on a deduced wall).
     occupied: (C,) bool or None: cells holding any wall point of the line, at any height.
-    lintel: (C,) bool or None: cells whose wall points all stand over ``_LINTEL_LOW`` (the
-    wall above an opening, or above tall furniture).
+    lintel: (C,) bool or None: cells whose wall stands over an opening: all its points over
+    ``_LINTEL_LOW`` (above a door, or above tall furniture), or over and under a window.
     """
 
     axis: int
@@ -435,6 +438,19 @@ def _ray_crossings(
     return np.bincount(cells, minlength=n_cells).astype(np.float64)
 
 
+def _framed(keys: NDArray[np.int64], n_cells: int, s: float) -> NDArray[np.bool_]:
+    """(C,) cells whose wall points leave a gap of ``_WINDOW_HEIGHT`` or more that ends over
+    ``_LINTEL_LOW``: wall under and over a window (or a picture, a screen hiding it), which
+    stands there as the wall over a door does. keys: sorted unique ``cell * 4096 + bin``."""
+    cells, bins = keys // 4096, keys % 4096
+    same = cells[1:] == cells[:-1]
+    gap = (bins[1:] - bins[:-1] - 1) * s
+    window = same & (gap >= _WINDOW_HEIGHT) & (bins[1:] * s >= _LINTEL_LOW)
+    out = np.zeros(n_cells, dtype=bool)
+    out[cells[1:][window]] = True
+    return out
+
+
 def _lines_from_peak(
     axis: int,
     offset: float,
@@ -464,7 +480,7 @@ def _lines_from_peak(
     np.maximum.at(reach, keys // 4096, keys % 4096)
     lowest = np.full(n_cells, 4096, dtype=np.int64)
     np.minimum.at(lowest, keys // 4096, keys % 4096)
-    lintel = (lowest < 4096) & (lowest * s >= _LINTEL_LOW)
+    lintel = ((lowest < 4096) & (lowest * s >= _LINTEL_LOW)) | _framed(keys, n_cells, s)
     run = origin + (np.arange(n_cells) + 0.5) * s
     xy = np.column_stack([run, np.full(n_cells, offset)])
     least_n, least_top = rule.per_cell(xy if axis == 0 else xy[:, ::-1], s)
@@ -749,8 +765,65 @@ def find_wall_lines(
             lines += _lines_from_peak(axis, offset, members, grid, rule, params, flat_xy)
     if views:
         lines = _facing_cameras(lines, views, params)
+    lines = [line for line in lines if not _seen_through_opening(line, lines)]
     camera = views[0].centre[:2] if len(views) == 1 else None
     return lines + _occluded_links(lines, grid, camera)
+
+
+def _seen_through_opening(far: WallLine, lines: Sequence[WallLine]) -> bool:
+    """Whether ``far`` is a wall of the next room seen through a door or window of a nearer
+    wall facing the same way: that wall stands (whole, or over the opening) in front of
+    most of ``far``'s wall, shows an opening there and whole wall beside it, and no wall
+    facing the other way lies between the two (a room's own recess or arm would).
+
+    Through a doorway a scan sees the next room's far wall whole and longer than the door
+    (the view widens past it), often more wall than the short stretches either side of
+    the door: the chain would otherwise run along it, outside the room."""
+    if far.virtual:
+        return False
+    far_cells = np.flatnonzero(far.high)
+    if len(far_cells) == 0:
+        return False
+    first, last = int(far_cells[0]), int(far_cells[-1]) + 1
+    for near in lines:
+        if near is far or near.virtual or near.lintel is None or near.seen_through is None:
+            continue
+        depth = (near.offset - far.offset) * _interior_sign(near)
+        if not (
+            near.axis == far.axis
+            and near.travel == far.travel
+            and MAX_WALL_THICKNESS < depth <= _SEEN_THROUGH_REACH
+            and near.origin == far.origin
+            and len(near.high) >= last
+        ):
+            continue
+        standing = maximum_filter1d((near.high | near.lintel).astype(np.uint8), 3) > 0
+        opening = near.lintel & ~near.high & near.seen_through
+        if (
+            np.mean(standing[far_cells]) >= 0.5
+            and np.count_nonzero(opening[first:last]) >= _SEEN_OPENING_CELLS
+            and np.count_nonzero(near.high[first:last]) >= _SEEN_OPENING_CELLS
+            and not _wall_between(far, near, lines, first, last)
+        ):
+            return True
+    return False
+
+
+def _wall_between(
+    far: WallLine, near: WallLine, lines: Sequence[WallLine], first: int, last: int
+) -> bool:
+    """Whether a wall facing the other way stands between two parallel walls facing the
+    same way, along cells [first, last), farther than a wall's thickness from both (nearer,
+    it is one of their own far faces)."""
+    lo, hi = sorted((far.offset, near.offset))
+    return any(
+        line.axis == far.axis
+        and line.travel == -far.travel
+        and lo + MAX_WALL_THICKNESS < line.offset < hi - MAX_WALL_THICKNESS
+        and line.origin == far.origin
+        and np.count_nonzero(line.high[first:last]) >= _SEEN_OPENING_CELLS
+        for line in lines
+    )
 
 
 def _interior_sign(line: WallLine) -> int:

@@ -13,6 +13,7 @@ from services.pipeline import estimate_layout
 from services.rgbd import OPTICAL_TO_LEVEL
 from services.synthetic import SceneSpec, generate_scene
 from services.synthetic.render import KINECT
+from services.wall_graph import find_wall_chain
 from services.wall_lines import (
     WallLine,
     _closes_an_arm,
@@ -493,3 +494,81 @@ def test_a_frames_wall_with_its_floor_hidden_is_scanned_where_its_own_points_sta
 
     assert open_gap([view]) == 0.0  # the frame's wall may run on across the window
     assert open_gap([]) > 1.0  # a cloud's rule is unchanged: nothing scanned before it
+
+
+def _surface(
+    rng: np.random.Generator, lo: list[float], hi: list[float], normal: list[float], n: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Points (n) uniform in the box [lo, hi], one side of zero extent (a surface), and
+    their normal."""
+    points = rng.uniform(lo, hi, (n, 3))
+    return points, np.tile(np.asarray(normal, dtype=np.float64), (n, 1))
+
+
+def _scene(parts: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    return np.vstack([p for p, _ in parts]), np.vstack([n for _, n in parts])
+
+
+def _wall_with_window(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A corner: a wall along y at x = 0 (interior +x) and a wall along x at y = 0 (interior
+    +y) from x = 0 to 5, with a window from x = 3.8 to the scan's end at 5 (sill at 0.8 m,
+    head at 2.0 m, their reveals 0.25 m deep behind the wall), and the floor in front."""
+    parts = [
+        _surface(rng, [0, 0, 0], [0, 3, 2.6], [1, 0, 0], 4000),
+        _surface(rng, [0, 0, 0], [3.8, 0, 2.6], [0, 1, 0], 5000),
+        _surface(rng, [3.8, 0, 0], [5, 0, 0.8], [0, 1, 0], 500),
+        _surface(rng, [3.8, 0, 2.0], [5, 0, 2.6], [0, 1, 0], 400),
+        _surface(rng, [3.8, -0.25, 0.8], [5, 0, 0.8], [0, 0, 1], 1500),
+        _surface(rng, [3.8, -0.25, 2.0], [5, 0, 2.0], [0, 0, -1], 1500),
+        _surface(rng, [0, 0, 0], [5, 3, 0], [0, 0, 1], 12000),
+    ]
+    return _scene(parts)
+
+
+def test_the_wall_under_and_over_a_window_stands_and_a_chain_runs_across_it() -> None:
+    points, normals = _wall_with_window(np.random.default_rng(3))
+    lines = find_wall_lines(points, normals, 0.0, 2.6, LayoutParams())
+    (line,) = [ln for ln in lines if ln.axis == 0 and not ln.virtual]
+    assert float(line.segments[-1, 1]) == pytest.approx(3.8, abs=0.1)  # whole wall ends
+    run = line.origin + (np.arange(len(line.high)) + 0.5) * line.cell_size
+    assert line.lintel is not None
+    assert line.lintel[(run > 3.9) & (run < 4.9)].all(), "wall stands under and over it"
+    assert not line.lintel[(run > 0.2) & (run < 3.7)].any()
+    chain = find_wall_chain(lines, LayoutParams())
+    assert chain is not None
+    np.testing.assert_allclose(chain.keypoints[0], [0.0, 3.0], atol=0.1)
+    np.testing.assert_allclose(chain.keypoints[1], [0.0, 0.0], atol=0.05)
+    np.testing.assert_allclose(chain.keypoints[-1], [5.0, 0.0], atol=0.1)
+
+
+def _door_with_the_next_room_behind(rng: np.random.Generator, lintel: bool):
+    """A corner: walls at x = 0 (interior +x) and y = 0 (interior +y, x from 0 to 3) with a
+    door from x = 1.5 to 2.4 (the wall over it from 2.0 m when ``lintel``; without, an opening
+    up to the ceiling); through it the floor, wider farther away, and 2.2 m behind a wall
+    2.7 m long facing the door."""
+    parts = [
+        _surface(rng, [0, 0, 0], [0, 3, 2.6], [1, 0, 0], 4000),
+        _surface(rng, [0, 0, 0], [1.5, 0, 2.6], [0, 1, 0], 2000),
+        _surface(rng, [2.4, 0, 0], [3, 0, 2.6], [0, 1, 0], 800),
+        _surface(rng, [1.5, -1.2, 0], [2.4, 0, 0], [0, 0, 1], 800),
+        _surface(rng, [0.6, -2.2, 0], [3.3, -1.2, 0], [0, 0, 1], 2000),  # the view widens
+        _surface(rng, [0.6, -2.2, 0], [3.3, -2.2, 2.6], [0, 1, 0], 4000),
+        _surface(rng, [0, 0, 0], [3, 3, 0], [0, 0, 1], 8000),
+    ]
+    if lintel:
+        parts.append(_surface(rng, [1.5, 0, 2.0], [2.4, 0, 2.6], [0, 1, 0], 400))
+    return _scene(parts)
+
+
+@pytest.mark.parametrize("lintel", [True, False])
+def test_a_wall_seen_through_a_door_is_the_next_rooms(lintel: bool) -> None:
+    # Under a lintel the far wall is the next room's, seen through the door: no wall of
+    # this scan. Without one the opening may be the room stepping back: its wall is kept.
+    points, normals = _door_with_the_next_room_behind(np.random.default_rng(5), lintel)
+    lines = find_wall_lines(points, normals, 0.0, 2.6, LayoutParams())
+    along_x = {round(ln.offset, 1) for ln in lines if ln.axis == 0 and not ln.virtual}
+    assert along_x == ({0.0} if lintel else {0.0, -2.2})
+    chain = find_wall_chain(lines, LayoutParams())
+    assert chain is not None
+    if lintel:
+        np.testing.assert_allclose(chain.keypoints, [[0.0, 3.0], [0.0, 0.0], [3.0, 0.0]], atol=0.1)
