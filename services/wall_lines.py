@@ -772,9 +772,12 @@ def find_wall_lines(
 
 def _seen_through_opening(far: WallLine, lines: Sequence[WallLine]) -> bool:
     """Whether ``far`` is a wall of the next room seen through a door or window of a nearer
-    wall facing the same way: that wall stands (whole, or over the opening) in front of
-    most of ``far``'s wall, shows an opening there and whole wall beside it, and no wall
-    facing the other way lies between the two (a room's own recess or arm would).
+    wall facing the same way: that wall shows an opening in front of ``far`` and whole wall
+    beside it, stands (whole, or over the opening) in front of most of ``far``'s wall where
+    the scan saw it at all (a scan that ends in a doorway may see on through it past its
+    own end), and no wall facing the other way lies between the two (a room's own recess or
+    arm would). Where the room steps back instead, the space behind the nearer wall's line
+    is seen open in front of ``far``.
 
     Through a doorway a scan sees the next room's far wall whole and longer than the door
     (the view widens past it), often more wall than the short stretches either side of
@@ -798,9 +801,12 @@ def _seen_through_opening(far: WallLine, lines: Sequence[WallLine]) -> bool:
         ):
             continue
         standing = maximum_filter1d((near.high | near.lintel).astype(np.uint8), 3) > 0
+        known = (near.occupied if near.occupied is not None else near.high) | near.seen_through
         opening = near.lintel & ~near.high & near.seen_through
+        seen = far_cells[known[far_cells]]
         if (
-            np.mean(standing[far_cells]) >= 0.5
+            len(seen)
+            and np.mean(standing[seen]) >= 0.5
             and np.count_nonzero(opening[first:last]) >= _SEEN_OPENING_CELLS
             and np.count_nonzero(near.high[first:last]) >= _SEEN_OPENING_CELLS
             and not _wall_between(far, near, lines, first, last)
