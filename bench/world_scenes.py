@@ -58,7 +58,8 @@ CACHE_VERSION = 18  # layouts change: 2 chain ends through doorways, 3 also alon
 # 0-1 m past their stretches (was 0.5-1) and 1-4 m of floor (was 1.5-5); 17 windows' walls
 # stand over and under them, walls seen through a nearer wall's opening are no walls, and the
 # scenes' doors show half the time the next room's far wall; 18 a wall is seen through an opening
-# by where the nearer wall was seen at all
+# by where the nearer wall was seen at all, and a cloud's floor seen through a door is no space
+# seen past the walls across it
 DEFAULT_CACHE = Path(__file__).resolve().parents[1] / "out" / "bench-cache"
 _SEED_BASE = {"tune": 100_000, "test": 200_000}
 _REAL_OFFSET = 5_000

@@ -749,20 +749,26 @@ def find_wall_lines(
         horizon=_Horizon.of(views[0].centre, aligned[in_band]) if len(views) == 1 else None,
         reach_cells=_THIN_REACH_CELLS if thin else 0,
     )
-    lines: list[WallLine] = []
     flat_xy = aligned[horizontal, :2]
-    for axis in (0, 1):
-        offset_axis = 1 - axis
-        facing = in_band & (np.abs(normals[:, offset_axis]) > _AXIS_COS)
-        wall_points = aligned[facing]
-        min_support = params.min_wall_cells * rule.n * 0.5
-        for peak in offset_peaks(wall_points[:, offset_axis], min_support):
-            near = np.abs(wall_points[:, offset_axis] - peak) < _LINE_TOLERANCE
-            members = wall_points[near]
-            if len(members) == 0:
-                continue  # a peak of the binned histogram can fall between the points
-            offset = float(np.median(members[:, offset_axis]))
-            lines += _lines_from_peak(axis, offset, members, grid, rule, params, flat_xy)
+
+    def along(axis: int, on: _Grid) -> list[WallLine]:
+        facing = in_band & (np.abs(normals[:, 1 - axis]) > _AXIS_COS)
+        return _axis_lines(axis, aligned[facing], on, rule, params, flat_xy)
+
+    first = [along(0, grid), along(1, grid)]
+    lines = first[0] + first[1]
+    if not views:
+        # The floor seen through a door lies behind the walls beside it too (a notch's side,
+        # a wing's end next to the door): it is no space seen past those. (A frame's camera
+        # tells what it saw through which cell; a cloud's points do not.)
+        redone = list(first)
+        for axis in (0, 1):
+            through = _through_openings(first[1 - axis], flat_xy)
+            if through.any():
+                counted = horizontal.copy()
+                counted[np.flatnonzero(horizontal)[through]] = False
+                redone[axis] = along(axis, _make_grid(aligned[:, :2], params.cell_size, counted))
+        lines = redone[0] + redone[1]
     if views:
         lines = _facing_cameras(lines, views, params)
     lines = [line for line in lines if not _seen_through_opening(line, lines)]
@@ -770,14 +776,66 @@ def find_wall_lines(
     return lines + _occluded_links(lines, grid, camera)
 
 
+def _axis_lines(
+    axis: int,
+    wall_points: FloatArray,
+    grid: _Grid,
+    rule: _TallRule,
+    params: LayoutParams,
+    flat_xy: FloatArray,
+) -> list[WallLine]:
+    """The wall lines along ``axis`` of the wall points facing across it, strongest first."""
+    offset_axis = 1 - axis
+    lines: list[WallLine] = []
+    min_support = params.min_wall_cells * rule.n * 0.5
+    for peak in offset_peaks(wall_points[:, offset_axis], min_support):
+        near = np.abs(wall_points[:, offset_axis] - peak) < _LINE_TOLERANCE
+        members = wall_points[near]
+        if len(members) == 0:
+            continue  # a peak of the binned histogram can fall between the points
+        offset = float(np.median(members[:, offset_axis]))
+        lines += _lines_from_peak(axis, offset, members, grid, rule, params, flat_xy)
+    return lines
+
+
+def _through_openings(lines: Sequence[WallLine], flat_xy: FloatArray) -> NDArray[np.bool_]:
+    """(F,) the horizontal-surface points ``flat_xy`` seen through a door or window of one of
+    ``lines``: behind it, within ``_SEEN_THROUGH_REACH``, in front of the opening or off to
+    its side by no more than their depth behind it (the view widens past the jambs), and
+    behind the wall itself, not past its ends (there the room may go on round a corner)."""
+    out = np.zeros(len(flat_xy), dtype=bool)
+    for line in lines:
+        if line.virtual or line.lintel is None or line.seen_through is None:
+            continue
+        opening = line.lintel & ~line.high & line.seen_through
+        spans = _runs(opening, 0, _SEEN_OPENING_CELLS)
+        if not spans:
+            continue
+        walls = _wall_runs(line)
+        depth = (line.offset - flat_xy[:, 1 - line.axis]) * _interior_sign(line)
+        run = flat_xy[:, line.axis]
+        behind = (depth >= _NEAR_STRIP) & (depth <= _SEEN_THROUGH_REACH)
+        cell = line.cell_size
+        for a, b in spans:
+            i, j = next((i, j) for i, j in walls if i <= a and b <= j)
+            lo, hi = line.origin + a * cell, line.origin + b * cell
+            wall_lo, wall_hi = line.origin + i * cell, line.origin + j * cell
+            out |= (
+                behind
+                & (run >= np.maximum(lo - depth, wall_lo))
+                & (run <= np.minimum(hi + depth, wall_hi))
+            )
+    return out
+
+
 def _seen_through_opening(far: WallLine, lines: Sequence[WallLine]) -> bool:
     """Whether ``far`` is a wall of the next room seen through a door or window of a nearer
     wall facing the same way: that wall shows an opening in front of ``far`` and whole wall
-    beside it, stands (whole, or over the opening) in front of most of ``far``'s wall where
-    the scan saw it at all (a scan that ends in a doorway may see on through it past its
-    own end), and no wall facing the other way lies between the two (a room's own recess or
-    arm would). Where the room steps back instead, the space behind the nearer wall's line
-    is seen open in front of ``far``.
+    beside the opening (not only over it: a soffit), stands (whole, or over the opening) in
+    front of most of ``far``'s wall where the scan saw it at all (a scan that ends in a
+    doorway may see on through it past its own end), and no wall facing the other way lies
+    between the two (a room's own recess or arm would). Where the room steps back instead,
+    the space behind the nearer wall's line is seen open in front of ``far``.
 
     Through a doorway a scan sees the next room's far wall whole and longer than the door
     (the view widens past it), often more wall than the short stretches either side of
@@ -804,15 +862,32 @@ def _seen_through_opening(far: WallLine, lines: Sequence[WallLine]) -> bool:
         known = (near.occupied if near.occupied is not None else near.high) | near.seen_through
         opening = near.lintel & ~near.high & near.seen_through
         seen = far_cells[known[far_cells]]
+        in_front = np.flatnonzero(opening[first:last]) + first
         if (
             len(seen)
             and np.mean(standing[seen]) >= 0.5
-            and np.count_nonzero(opening[first:last]) >= _SEEN_OPENING_CELLS
-            and np.count_nonzero(near.high[first:last]) >= _SEEN_OPENING_CELLS
+            and len(in_front) >= _SEEN_OPENING_CELLS
+            and any(
+                i <= in_front[0] < j and np.count_nonzero(near.high[i:j]) >= _SEEN_OPENING_CELLS
+                for i, j in _wall_runs(near)
+            )
             and not _wall_between(far, near, lines, first, last)
         ):
             return True
     return False
+
+
+def _wall_runs(line: WallLine) -> list[tuple[int, int]]:
+    """Spans [i, j) of cells where the line's own wall stands, at any height or only over an
+    opening, whatever its evidence (the floor seen past a door hides the wall beside it:
+    space behind it); gaps of two cells bridged."""
+    if line.lintel is None:
+        return _runs(line.high, _MAX_GAP_CELLS, 1)
+    return _runs(
+        line.occupied | line.lintel if line.occupied is not None else line.lintel,
+        _MAX_GAP_CELLS,
+        1,
+    )
 
 
 def _wall_between(

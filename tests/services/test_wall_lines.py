@@ -572,3 +572,61 @@ def test_a_wall_seen_through_a_door_is_the_next_rooms(lintel: bool) -> None:
     assert chain is not None
     if lintel:
         np.testing.assert_allclose(chain.keypoints, [[0.0, 3.0], [0.0, 0.0], [3.0, 0.0]], atol=0.1)
+
+
+def _notch_beside_a_door(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A wall along x at y = 0 (interior +y, x from 0 to 6) with a notch out of the room
+    (x from 1.9 to 2.5, 0.8 m deep) and a door from x = 3.0 to 3.9 (wall over it from 2 m);
+    through the door the floor of the next room, wider the farther from the door, reaching
+    behind the notch's side at x = 2.5."""
+    parts = [
+        _surface(rng, [0, 0, 0], [1.9, 0, 2.6], [0, 1, 0], 2500),
+        _surface(rng, [2.5, 0, 0], [3.0, 0, 2.6], [0, 1, 0], 700),
+        _surface(rng, [3.9, 0, 0], [6, 0, 2.6], [0, 1, 0], 2800),
+        _surface(rng, [3.0, 0, 2.0], [3.9, 0, 2.6], [0, 1, 0], 300),
+        _surface(rng, [1.9, -0.8, 0], [1.9, 0, 2.6], [1, 0, 0], 1100),
+        _surface(rng, [2.5, -0.8, 0], [2.5, 0, 2.6], [-1, 0, 0], 1100),
+        _surface(rng, [1.9, -0.8, 0], [2.5, -0.8, 2.6], [0, 1, 0], 800),
+        _surface(rng, [0, 0, 0], [6, 3, 0], [0, 0, 1], 14000),
+        _surface(rng, [1.9, -0.8, 0], [2.5, 0, 0], [0, 0, 1], 400),
+    ]
+    fan = rng.uniform([1.5, -2.5, 0], [5.4, -0.15, 0], (6000, 3))
+    depth = -fan[:, 1]
+    fan = fan[(fan[:, 0] > 3.0 - depth) & (fan[:, 0] < 3.9 + depth) & (fan[:, 0] > 2.55)]
+    parts.append((fan, np.tile([0.0, 0.0, 1.0], (len(fan), 1))))
+    return _scene(parts)
+
+
+def test_the_floor_seen_through_a_door_is_no_space_past_the_wall_beside_it() -> None:
+    # The notch's side at x = 2.5 has the next room's floor behind it, seen through the door
+    # beside it, not through the side: it is still a wall, and the chain goes round the notch.
+    points, normals = _notch_beside_a_door(np.random.default_rng(2))
+    lines = find_wall_lines(points, normals, 0.0, 2.6, LayoutParams())
+    sides = [ln for ln in lines if ln.axis == 1 and not ln.virtual and abs(ln.offset - 2.5) < 0.05]
+    assert [ln.travel for ln in sides] == [1]
+    chain = find_wall_chain(lines, LayoutParams())
+    assert chain is not None
+    notch = [[1.9, 0.0], [1.9, -0.8], [2.5, -0.8], [2.5, 0.0]]
+    assert any(
+        np.allclose(chain.keypoints[i : i + 4], notch, atol=0.1)
+        for i in range(len(chain.keypoints) - 3)
+    )
+
+
+def test_a_wall_behind_a_soffit_is_kept() -> None:
+    # A soffit 0.5 m before the wall (its face from 2.1 m to the ceiling, the floor seen
+    # under it) shows only wall over an opening, none beside it: no door, so the wall
+    # behind it is the room's.
+    rng = np.random.default_rng(4)
+    points, normals = _scene(
+        [
+            _surface(rng, [0, 0, 0], [4, 0, 2.6], [0, 1, 0], 5000),
+            _surface(rng, [1, 0.5, 2.1], [3, 0.5, 2.6], [0, 1, 0], 800),
+            _surface(rng, [1, 0, 2.1], [3, 0.5, 2.1], [0, 0, -1], 500),
+            _surface(rng, [0, 0, 0], [4, 3, 0], [0, 0, 1], 9000),
+        ]
+    )
+    lines = find_wall_lines(points, normals, 0.0, 2.6, LayoutParams())
+    walls = [ln for ln in lines if ln.axis == 0 and not ln.virtual and abs(ln.offset) < 0.05]
+    assert [ln.travel for ln in walls] == [1]
+    assert np.count_nonzero(walls[0].high) * walls[0].cell_size > 3.5
