@@ -769,7 +769,7 @@ def find_wall_lines(
                 counted[np.flatnonzero(horizontal)[through]] = False
                 redone[axis] = along(axis, _make_grid(aligned[:, :2], params.cell_size, counted))
         lines = redone[0] + redone[1]
-    if views:
+    else:
         lines = _facing_cameras(lines, views, params)
     lines = [line for line in lines if not _seen_through_opening(line, lines)]
     camera = views[0].centre[:2] if len(views) == 1 else None
@@ -807,8 +807,7 @@ def _through_openings(lines: Sequence[WallLine], flat_xy: FloatArray) -> NDArray
     for line in lines:
         if line.virtual or line.lintel is None or line.seen_through is None:
             continue
-        opening = line.lintel & ~line.high & line.seen_through
-        spans = _runs(opening, 0, _SEEN_OPENING_CELLS)
+        spans = _runs(_opening(line), 0, _SEEN_OPENING_CELLS)
         if not spans:
             continue
         walls = _wall_runs(line)
@@ -860,9 +859,8 @@ def _seen_through_opening(far: WallLine, lines: Sequence[WallLine]) -> bool:
             continue
         standing = maximum_filter1d((near.high | near.lintel).astype(np.uint8), 3) > 0
         known = (near.occupied if near.occupied is not None else near.high) | near.seen_through
-        opening = near.lintel & ~near.high & near.seen_through
         seen = far_cells[known[far_cells]]
-        in_front = np.flatnonzero(opening[first:last]) + first
+        in_front = np.flatnonzero(_opening(near)[first:last]) + first
         if (
             len(seen)
             and np.mean(standing[seen]) >= 0.5
@@ -875,6 +873,14 @@ def _seen_through_opening(far: WallLine, lines: Sequence[WallLine]) -> bool:
         ):
             return True
     return False
+
+
+def _opening(line: WallLine) -> NDArray[np.bool_]:
+    """(C,) cells of a door or window in the line: wall only over it (or over and under),
+    space seen behind it, no whole wall. The line has ``lintel`` and ``seen_through``."""
+    assert line.lintel is not None and line.seen_through is not None
+    opening: NDArray[np.bool_] = line.lintel & ~line.high & line.seen_through
+    return opening
 
 
 def _wall_runs(line: WallLine) -> list[tuple[int, int]]:
