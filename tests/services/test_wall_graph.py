@@ -319,3 +319,27 @@ def test_a_chain_does_not_run_out_through_an_opening_after_a_corner(standing: bo
     kept = _across_openings(chain, [wall])
     expected = [[0.0, -3.0], [0.0, 2.0], [-5.0, 2.0]] if standing else chain
     assert np.allclose(kept, expected)
+
+
+def test_a_chain_seen_nearly_all_around_keeps_the_wall_it_starts_along() -> None:
+    # A U room (7.1 x 9 m, a 2.6 m wide notch 7.2 m deep into its top) seen by one scan
+    # along every wall but the right side's top half and the notch's top: the scan starts
+    # 2.95 m up the notch's right side, runs down it, round the notch, the left arm, the
+    # bottom and ends 4 m up the right side. In the one-path-per-state search the best path
+    # into the notch's left side came back round the room, holding a node the whole chain
+    # needed: the chain began at the notch's corner and dropped the 5.6 m it starts along.
+    lines = [
+        _line(0, 1.5, 1, [(2.44, 9.56)]),  # bottom, interior +y
+        _line(0, 3.31, -1, [(4.12, 6.68)]),  # the notch's bottom, interior -y
+        _line(0, 10.5, -1, [(2.44, 4.12)]),  # the left arm's top, interior -y
+        _line(1, 2.46, -1, [(1.51, 4.23), (5.35, 10.47)]),  # left side with a door
+        _line(1, 4.1, 1, [(3.35, 10.47)]),  # the notch's left side, interior -x
+        _line(1, 6.69, -1, [(3.35, 8.95)]),  # the notch's right side, interior +x
+        _line(1, 9.54, 1, [(1.51, 5.51)]),  # right side, interior -x
+    ]
+    chain = find_wall_chain(lines, LayoutParams())
+    assert chain is not None
+    assert np.allclose(chain.keypoints[0], [6.69, 8.95], atol=0.1)
+    assert np.allclose(chain.keypoints[1], [6.69, 3.31], atol=0.1)
+    assert np.allclose(chain.keypoints[-1], [9.54, 5.51], atol=0.1)
+    assert len(chain.keypoints) == 8
