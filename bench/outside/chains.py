@@ -10,12 +10,14 @@ Each fragment is laid out on its own and its truth is put in the project's groun
   (:func:`bench.scoring.chain_error_in_plan`, 5 % of the fragment's diagonal), split by what
   lies near their arc's ends (a door, a window, neither: openings at a cut are where chains
   leave their room); ``--list`` prints each wrong chain;
+* ``--cues`` prints :func:`bench.placement_trust.cue_table`: how well each junction cue
+  tells true neighbours from false ones here (AUC);
 * ``--anatomy`` places every room (:func:`services.pipeline.place_site`, the CLI's
   placement without its refinement of the result files) and prints
   :mod:`bench.failure_anatomy`'s tables: per bucket, why the wrong rooms are wrong.
 
     .venv/bin/python -m bench.outside.chains --seed 12 [--per-bucket 20] [--real 40]
-        [--anatomy] [--list] [--workers 2]
+        [--anatomy] [--cues] [--list] [--workers 2]
 
 Seeds 9 and below were used while building the layout rules; judge changes on later ones.
 """
@@ -36,6 +38,7 @@ from rich.console import Console
 from bench.failure_anatomy import anatomy_of, cause_table, term_table
 from bench.outside.clouds import generate, perimeter_cum
 from bench.outside.run import Job, cloud_jobs
+from bench.placement_trust import cue_table
 from bench.room_shapes import DEFAULT_PATH
 from bench.scoring import chain_error_in_plan
 from bench.world_scenes import CachedScene
@@ -212,6 +215,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--real", type=int, default=40, help="rooms of real outlines")
     parser.add_argument("--workers", type=int, default=2, help="processes building scenes")
     parser.add_argument("--anatomy", action="store_true", help="place the rooms: why wrong")
+    parser.add_argument("--cues", action="store_true", help="junction cues' AUC")
     parser.add_argument("--list", action="store_true", help="print every wrong chain")
     parser.add_argument("--ends", action="store_true", help="list: by the ends' error")
     args = parser.parse_args(argv)
@@ -224,6 +228,8 @@ def main(argv: list[str] | None = None) -> int:
             for line in describe_wrong(scene, args.ends):
                 console.print(line, highlight=False)
     console.print(chain_table(scenes), highlight=False)
+    if args.cues:
+        console.print(cue_table(scenes, PipelineParams().placement))
     if args.anatomy:
         params = PipelineParams()
         with multiprocessing.get_context("fork").Pool(args.workers) as pool:

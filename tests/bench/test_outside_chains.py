@@ -19,6 +19,7 @@ from bench.outside.chains import (
     wrong_chains,
 )
 from bench.outside.run import Job
+from bench.placement_trust import cue_table
 from bench.world_scenes import CachedScene
 from schemas.params import PipelineParams
 from services.model_export import to_site
@@ -98,3 +99,12 @@ def test_a_scene_folder_holds_what_the_cli_reads(tmp_path: Path) -> None:
     assert sorted(p.name for p in tmp_path.glob("*.ply")) == ["frag_00.ply", "frag_01.ply"]
     assert set(built.layouts) == {"frag_00", "frag_01"}
     assert built.name == "outside synthetic"
+
+
+def test_the_junction_cues_read_outside_scenes(scene: CachedScene) -> None:
+    table = cue_table([scene], PipelineParams().placement)
+    n = len(scene.truth["fragments"])
+    true_pairs = list(table.columns[2].cells)
+    false_pairs = list(table.columns[3].cells)
+    assert true_pairs == [str(n)] * 3  # each fragment's true successor, once per cue
+    assert false_pairs == [str(n * (n - 1) - n)] * 3
