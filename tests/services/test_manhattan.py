@@ -212,3 +212,37 @@ def test_other_views_are_left_to_the_usual_search(floor_share, pitch):
     # faces (leaning forwards, 57 degrees from level up) must not be taken for it; a floor
     # past the steepest pitch levelled.
     assert steep_floor_tilt(_steep_view(floor_share, pitch), ManhattanParams(), 60.0) is None
+
+
+def _corner_scan(wardrobe_top: bool, ceiling: bool) -> OrientedCloud:
+    """Two walls 2.7 m high meeting at a corner, 1.5 m of floor before them, a 2 m high
+    wardrobe's top 3 m long and a 2.7 m ceiling, each optional (the scan 2 cm noisy)."""
+    rng = np.random.default_rng(4)
+
+    def patch(n: int, lo: list[float], hi: list[float]) -> np.ndarray:
+        return rng.uniform(lo, hi, (n, 3))
+
+    parts = [
+        patch(10000, [0.0, 1.5, 0.0], [4.0, 3.0, 0.0]),  # floor
+        patch(15000, [0.0, 3.0, 0.0], [4.0, 3.0, 2.7]),  # wall along x
+        patch(12000, [4.0, 0.0, 0.0], [4.0, 3.0, 2.7]),  # wall along y
+    ]
+    if wardrobe_top:
+        parts.append(patch(5000, [0.5, 2.4, 2.0], [3.5, 3.0, 2.0]))
+    if ceiling:
+        parts.append(patch(8000, [0.0, 1.5, 2.7], [4.0, 3.0, 2.7]))
+    points = np.vstack(parts) + rng.normal(0, 0.02 / 3, (sum(len(p) for p in parts), 3))
+    return thin_with_normals(points, ManhattanParams())
+
+
+@pytest.mark.parametrize(("wardrobe_top", "ceiling"), [(True, False), (True, True), (False, True)])
+def test_a_ceiling_is_the_top_of_the_scan_not_a_surface_the_walls_rise_past(
+    wardrobe_top: bool, ceiling: bool
+) -> None:
+    frame = estimate_manhattan_frame(_corner_scan(wardrobe_top, ceiling))
+    if ceiling:
+        assert frame.ceiling_z is not None
+        assert frame.ceiling_z - frame.floor_z == pytest.approx(2.7, abs=0.05)
+    else:
+        # The wardrobe's top at 2 m with 0.7 m of wall above it all along: no ceiling.
+        assert frame.ceiling_z is None
