@@ -9,7 +9,9 @@ Each fragment is laid out on its own and its truth is put in the project's groun
 * the chain table counts the fragments whose chain is wrong in plan
   (:func:`bench.scoring.chain_error_in_plan`, 5 % of the fragment's diagonal), split by what
   lies near their arc's ends (a door, a window, neither: openings at a cut are where chains
-  leave their room); ``--list`` prints each wrong chain;
+  leave their room), with two stricter tests: both ends right, and the whole shape right
+  (:func:`shape_error_in_plan`: a chain that cuts across a bay or drops a notch between
+  right ends); ``--list`` prints each wrong chain (``--by ends`` or ``--by shape``);
 * ``--cues`` prints :func:`bench.placement_trust.cue_table`: how well each junction cue
   tells true neighbours from false ones here (AUC);
 * ``--anatomy`` places every room (:func:`services.pipeline.place_site`, the CLI's
@@ -17,7 +19,7 @@ Each fragment is laid out on its own and its truth is put in the project's groun
   :mod:`bench.failure_anatomy`'s tables: per bucket, why the wrong rooms are wrong.
 
     .venv/bin/python -m bench.outside.chains --seed 12 [--per-bucket 20] [--real 40]
-        [--anatomy] [--cues] [--list] [--workers 2]
+        [--anatomy] [--cues] [--list [--by ends|shape]] [--workers 2]
 
 Seeds 9 and below were used while building the layout rules; judge changes on later ones.
 """
@@ -29,8 +31,9 @@ import multiprocessing
 import tempfile
 import time
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from rich.console import Console
@@ -43,6 +46,7 @@ from bench.room_shapes import DEFAULT_PATH
 from bench.scoring import chain_error_in_plan
 from bench.world_scenes import CachedScene
 from schemas.params import PipelineParams
+from services.geometry import distance_to_chain
 from services.local_layout import estimate_local_layout
 from services.model_export import to_site
 from services.parsing_ply import read_ply_xyz
@@ -50,6 +54,8 @@ from services.types import FloatArray
 
 _END_REACH = 1.0  # m along the outline: an opening this close to an arc end is "near it"
 _MAX_POINTS = 10**8
+_SHAPE_SPACING = 0.02  # m between the points the shape test samples along a chain
+ChainTest = Literal["paper", "ends", "shape"]
 
 
 def outline_stretch(polygon: FloatArray, start: float, length: float) -> FloatArray:
@@ -153,47 +159,85 @@ def end_error_in_plan(estimated_local: Any, fragment: dict[str, Any]) -> float:
     return float(np.linalg.norm(estimate[[0, -1]] - truth[[0, -1]], axis=1).max())
 
 
-def wrong_chains(scene: CachedScene, by_ends: bool = False) -> list[tuple[dict[str, Any], float]]:
-    """(truth fragment, plan error in m) of each fragment whose chain is wrong in plan: by
-    the paper's mean keypoint error, or with ``by_ends`` by :func:`end_error_in_plan`."""
+def shape_error_in_plan(estimated_local: Any, fragment: dict[str, Any]) -> float:
+    """The farthest either chain strays from the other, m, in plan (the Hausdorff distance
+    of the two polylines; inf for an empty chain). A chain that cuts across a bay or drops
+    a notch between right ends passes the paper's test and the ends' test, not this one."""
+    if len(estimated_local) < 2:
+        return float("inf")
+    pose = np.asarray(fragment["pose"], dtype=np.float64)
+    estimate = to_site(np.asarray(estimated_local, dtype=np.float64), pose)[:, :2]
+    truth = to_site(np.asarray(fragment["keypoints_local"]), pose)[:, :2]
+    return float(
+        max(
+            distance_to_chain(_sampled(estimate), truth).max(),
+            distance_to_chain(_sampled(truth), estimate).max(),
+        )
+    )
+
+
+def _sampled(chain: FloatArray) -> FloatArray:
+    """Points every ``_SHAPE_SPACING`` (or closer) along a polyline, its corners included."""
+    steps = np.linalg.norm(np.diff(chain, axis=0), axis=1)
+    along = np.concatenate([[0.0], np.cumsum(steps)])
+    at = np.union1d(np.arange(0.0, along[-1], _SHAPE_SPACING), along)
+    return np.column_stack([np.interp(at, along, chain[:, k]) for k in range(2)])
+
+
+_MEASURES: dict[ChainTest, Callable[[Any, dict[str, Any]], float]] = {
+    "paper": chain_error_in_plan,
+    "ends": end_error_in_plan,
+    "shape": shape_error_in_plan,
+}
+
+
+def wrong_chains(
+    scene: CachedScene, test: ChainTest = "paper"
+) -> list[tuple[dict[str, Any], float]]:
+    """(truth fragment, plan error in m) of each fragment whose chain is wrong in plan (5 %
+    of its diagonal): by the paper's mean keypoint error, by :func:`end_error_in_plan`
+    (``"ends"``) or by :func:`shape_error_in_plan` (``"shape"``)."""
     wrong = []
     for fragment in scene.truth["fragments"]:
         layout = scene.layouts[fragment["id"]]
         estimated = layout.keypoints_local() if layout.ok else np.zeros((0, 3))
-        measure = end_error_in_plan if by_ends else chain_error_in_plan
-        error = measure(estimated, fragment)
+        error = _MEASURES[test](estimated, fragment)
         if error >= 0.05 * fragment["diagonal"]:
             wrong.append((fragment, error))
     return wrong
 
 
 def chain_table(scenes: list[CachedScene]) -> str:
-    """Fragments, those whose chain is right in plan and those whose ends are too, by what
-    lies near their arc's ends."""
+    """Fragments, those whose chain is right in plan, and the shares whose ends and whose
+    whole shape are right too, by what lies near their arc's ends."""
     total: Counter[str] = Counter()
-    wrong: Counter[str] = Counter()
-    ends_off: Counter[str] = Counter()
+    wrong: dict[ChainTest, Counter[str]] = {test: Counter() for test in _MEASURES}
     for scene in scenes:
         total.update(f["near_end"] for f in scene.truth["fragments"])
-        wrong.update(f["near_end"] for f, _ in wrong_chains(scene))
-        ends_off.update(f["near_end"] for f, _ in wrong_chains(scene, by_ends=True))
-    lines = [f"{'near an end':<12} {'fragments':>9} {'right':>6} {'share':>7} {'ends right':>11}"]
+        for test, counts in wrong.items():
+            counts.update(f["near_end"] for f, _ in wrong_chains(scene, test))
+    lines = [
+        f"{'near an end':<12} {'fragments':>9} {'right':>6} {'share':>7} {'ends right':>11}"
+        f" {'shape right':>12}"
+    ]
     for group in (*("door", "window", "none"), "all"):
         n = total.total() if group == "all" else total[group]
-        bad = wrong.total() if group == "all" else wrong[group]
-        off = ends_off.total() if group == "all" else ends_off[group]
+        bad, ends, shape = (
+            counts.total() if group == "all" else counts[group] for counts in wrong.values()
+        )
         if n:
             lines.append(
-                f"{group:<12} {n:>9} {n - bad:>6} {(n - bad) / n:>7.1%} {(n - off) / n:>11.1%}"
+                f"{group:<12} {n:>9} {n - bad:>6} {(n - bad) / n:>7.1%} {(n - ends) / n:>11.1%}"
+                f" {(n - shape) / n:>12.1%}"
             )
     return "\n".join(lines)
 
 
-def describe_wrong(scene: CachedScene, by_ends: bool = False) -> list[str]:
-    """Three lines per wrong chain of a scene (``by_ends``: see :func:`wrong_chains`): its
+def describe_wrong(scene: CachedScene, test: ChainTest = "paper") -> list[str]:
+    """Three lines per wrong chain of a scene (by ``test``: see :func:`wrong_chains`): its
     name and error, the true and the estimated chain in world x, y."""
     lines = []
-    for fragment, error in wrong_chains(scene, by_ends):
+    for fragment, error in wrong_chains(scene, test):
         pose = np.asarray(fragment["pose"], dtype=np.float64)
         layout = scene.layouts[fragment["id"]]
         estimate = to_site(layout.keypoints_local(), pose)[:, :2] if layout.ok else np.zeros((0, 2))
@@ -217,7 +261,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--anatomy", action="store_true", help="place the rooms: why wrong")
     parser.add_argument("--cues", action="store_true", help="junction cues' AUC")
     parser.add_argument("--list", action="store_true", help="print every wrong chain")
-    parser.add_argument("--ends", action="store_true", help="list: by the ends' error")
+    parser.add_argument(
+        "--by", choices=list(_MEASURES), default="paper", help="list: the test a chain fails"
+    )
     args = parser.parse_args(argv)
     console = Console(width=160)
     jobs = cloud_jobs(args.per_bucket, args.real if DEFAULT_PATH.exists() else 0, args.seed)
@@ -225,7 +271,7 @@ def main(argv: list[str] | None = None) -> int:
         scenes = pool.map(_build, jobs, chunksize=1)
     if args.list:
         for scene in scenes:
-            for line in describe_wrong(scene, args.ends):
+            for line in describe_wrong(scene, args.by):
                 console.print(line, highlight=False)
     console.print(chain_table(scenes), highlight=False)
     if args.cues:

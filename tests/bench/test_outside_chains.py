@@ -76,7 +76,23 @@ def test_the_true_chain_is_the_arcs_outline_and_a_moved_chain_is_wrong(
     rows = chain_table([shifted]).splitlines()
     n = len(truth["fragments"])
     assert rows[-1].split()[:3] == ["all", str(n), str(n - len(before) - 1)]
-    assert fid in {f["id"] for f, _ in wrong_chains(shifted, by_ends=True)}
+    assert fid in {f["id"] for f, _ in wrong_chains(shifted, "ends")}
+    assert fid in {f["id"] for f, _ in wrong_chains(shifted, "shape")}
+
+
+def test_a_chain_cut_short_between_right_ends_fails_only_the_shape_test(
+    scene: CachedScene,
+) -> None:
+    # The chain with most corners replaced by the straight line between its ends: its ends
+    # stay right, its shape does not.
+    fid = max(scene.layouts, key=lambda f: len(scene.layouts[f].keypoints))
+    layout = scene.layouts[fid]
+    assert fid not in {f["id"] for f, _ in wrong_chains(scene, "shape")}
+    cut = dataclasses.replace(layout, keypoints=layout.keypoints[[0, -1]])
+    cut_scene = dataclasses.replace(scene, layouts={**scene.layouts, fid: cut})
+    assert fid not in {f["id"] for f, _ in wrong_chains(cut_scene, "ends")}
+    assert fid in {f["id"] for f, _ in wrong_chains(cut_scene, "shape")}
+    assert chain_table([cut_scene]).splitlines()[0].split()[-2:] == ["shape", "right"]
 
 
 def test_the_failure_anatomy_reads_an_outside_scene(scene: CachedScene) -> None:
