@@ -802,7 +802,10 @@ def _through_openings(lines: Sequence[WallLine], flat_xy: FloatArray) -> NDArray
     """(F,) the horizontal-surface points ``flat_xy`` seen through a door or window of one of
     ``lines``: behind it, within ``_SEEN_THROUGH_REACH``, in front of the opening or off to
     its side by no more than their depth behind it (the view widens past the jambs), and
-    behind the wall itself, not past its ends (there the room may go on round a corner)."""
+    behind the wall itself, not past its ends (there the room may go on round a corner).
+    The view stops at a wall behind the line that faces away from it: past that wall lies
+    another part of the room (a U's other arm behind the window of the gap between the
+    arms), seen from inside, not through the opening."""
     out = np.zeros(len(flat_xy), dtype=bool)
     for line in lines:
         if line.virtual or line.lintel is None or line.seen_through is None:
@@ -814,6 +817,7 @@ def _through_openings(lines: Sequence[WallLine], flat_xy: FloatArray) -> NDArray
         depth = (line.offset - flat_xy[:, 1 - line.axis]) * _interior_sign(line)
         run = flat_xy[:, line.axis]
         behind = (depth >= _NEAR_STRIP) & (depth <= _SEEN_THROUGH_REACH)
+        behind &= ~_past_back_wall(line, lines, flat_xy, depth)
         cell = line.cell_size
         for a, b in spans:
             i, j = next((i, j) for i, j in walls if i <= a and b <= j)
@@ -825,6 +829,28 @@ def _through_openings(lines: Sequence[WallLine], flat_xy: FloatArray) -> NDArray
                 & (run <= np.minimum(hi + depth, wall_hi))
             )
     return out
+
+
+def _past_back_wall(
+    line: WallLine, lines: Sequence[WallLine], flat_xy: FloatArray, depth: FloatArray
+) -> NDArray[np.bool_]:
+    """(F,) the points of ``flat_xy`` (``depth`` behind ``line``) that lie past a wall of
+    another line along the same axis, behind ``line``, whose interior faces away from it."""
+    past = np.zeros(len(flat_xy), dtype=bool)
+    sign = _interior_sign(line)
+    for back in lines:
+        if back.axis != line.axis or back.virtual or _interior_sign(back) != -sign:
+            continue
+        back_depth = (line.offset - back.offset) * sign
+        if not 0.0 < back_depth <= _SEEN_THROUGH_REACH:
+            continue
+        cells = np.floor((flat_xy[:, line.axis] - back.origin) / back.cell_size).astype(np.int64)
+        standing = np.zeros(len(back.high) + 1, dtype=bool)  # the last: off the line
+        for i, j in _wall_runs(back):
+            standing[i:j] = True
+        cells = np.where((cells >= 0) & (cells < len(back.high)), cells, len(back.high))
+        past |= (depth > back_depth) & standing[cells]
+    return past
 
 
 def _seen_through_opening(far: WallLine, lines: Sequence[WallLine]) -> bool:

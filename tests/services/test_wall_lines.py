@@ -630,3 +630,48 @@ def test_a_wall_behind_a_soffit_is_kept() -> None:
     walls = [ln for ln in lines if ln.axis == 0 and not ln.virtual and abs(ln.offset) < 0.05]
     assert [ln.travel for ln in walls] == [1]
     assert np.count_nonzero(walls[0].high) * walls[0].cell_size > 3.5
+
+
+def _u_seen_from_its_base(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A U room seen from its base (x from 0 to 2, y from -3 to 3; the scan ends at x = 1
+    where y > 0): its arms (x from 2 to 4) at y < -1.2 and y > 0, the gap between them
+    outside. Both walls facing the gap have a window from x = 2.2 to 3.8 (sill 0.9 m, head
+    2.1 m), the ground in the gap seen through them; the upper arm's end wall one from
+    y = 0.5 to 2.5, the ground behind it seen too."""
+    parts = [
+        _surface(rng, [0, -3, 0], [0, 0, 2.6], [1, 0, 0], 3000),
+        _surface(rng, [1, 3, 0], [4, 3, 2.6], [0, -1, 0], 3000),
+        _surface(rng, [0, -3, 0], [4, -3, 2.6], [0, 1, 0], 4000),
+        _surface(rng, [4, 0, 0], [4, 0.5, 2.6], [-1, 0, 0], 500),
+        _surface(rng, [4, 2.5, 0], [4, 3, 2.6], [-1, 0, 0], 500),
+        _surface(rng, [4, 0.5, 0], [4, 2.5, 0.9], [-1, 0, 0], 700),
+        _surface(rng, [4, 0.5, 2.1], [4, 2.5, 2.6], [-1, 0, 0], 400),
+        _surface(rng, [4.1, 0.4, 0], [6, 2.6, 0], [0, 0, 1], 1500),  # seen through it
+        _surface(rng, [4, -3, 0], [4, -1.2, 2.6], [-1, 0, 0], 2000),
+        _surface(rng, [2, -1.2, 0], [2, 0, 2.6], [-1, 0, 0], 1300),
+        _surface(rng, [0, -3, 0], [2, 0, 0], [0, 0, 1], 6000),
+        _surface(rng, [1, 0, 0], [2, 3, 0], [0, 0, 1], 3000),
+        _surface(rng, [2, 0, 0], [4, 3, 0], [0, 0, 1], 6000),
+        _surface(rng, [2, -3, 0], [4, -1.2, 0], [0, 0, 1], 3600),
+        _surface(rng, [2.4, -1.1, 0], [3.8, -0.1, 0], [0, 0, 1], 600),  # the gap's ground
+    ]
+    for y, facing in ((-1.2, -1.0), (0.0, 1.0)):
+        for lo, hi in ((2.0, 2.2), (3.8, 4.0)):
+            parts.append(_surface(rng, [lo, y, 0], [hi, y, 2.6], [0, facing, 0], 400))
+        parts.append(_surface(rng, [2.2, y, 0], [3.8, y, 0.9], [0, facing, 0], 500))
+        parts.append(_surface(rng, [2.2, y, 2.1], [3.8, y, 2.6], [0, facing, 0], 300))
+    return _scene(parts)
+
+
+def test_the_view_through_a_window_stops_at_a_wall_facing_away() -> None:
+    # The upper arm's floor lies behind the lower arm's window, but past the upper arm's own
+    # wall facing away from it: scanned from inside the room, not through the window. It is
+    # space on both sides of the gap's side at x = 2, so the chain does not cut the arm off.
+    points, normals = _u_seen_from_its_base(np.random.default_rng(6))
+    lines = find_wall_lines(points, normals, 0.0, 2.6, LayoutParams())
+    (side,) = [ln for ln in lines if ln.axis == 1 and not ln.virtual and abs(ln.offset - 2) < 0.05]
+    assert side.crossing_gap(0.2, 2.8) > 2.0
+    chain = find_wall_chain(lines, LayoutParams())
+    assert chain is not None
+    arm = [[2.0, -1.2], [2.0, 0.0], [4.0, 0.0], [4.0, 3.0], [1.0, 3.0]]
+    np.testing.assert_allclose(chain.keypoints[-5:], arm, atol=0.1)
