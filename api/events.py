@@ -69,4 +69,4 @@ async def site_event_stream(backend: Backend, site_id: str) -> AsyncIterator[str
                 return
     finally:
         with anyio.CancelScope(shield=True):
-            await pubsub.aclose()  # type: ignore[no-untyped-call]
+            await pubsub.aclose()

@@ -69,7 +69,7 @@ class ResultPublisher:
                     await self.publish(str(message["data"]))
         finally:
             with contextlib.suppress(*REDIS_DOWN):
-                await pubsub.aclose()  # type: ignore[no-untyped-call]
+                await pubsub.aclose()
 
     async def publish(self, envelope: str) -> None:
         """Publish one results-channel message (a malformed one is logged and skipped)."""

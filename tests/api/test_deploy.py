@@ -108,6 +108,24 @@ def test_dockerfile_copies_every_package() -> None:
     assert (ROOT / "deploy" / "Dockerfile.dockerignore").exists()
 
 
+def test_the_build_context_holds_what_the_dockerfile_copies() -> None:
+    """The dockerignore admits only listed paths: a COPY of anything else fails the build."""
+    admitted = {
+        line.removeprefix("!").removesuffix("/**")
+        for line in (ROOT / "deploy" / "Dockerfile.dockerignore").read_text().splitlines()
+        if line.startswith("!")
+    }
+    copied = [
+        source
+        for line in (ROOT / "deploy" / "Dockerfile").read_text().splitlines()
+        if line.startswith("COPY ") and "--from" not in line
+        for source in line.split()[1:-1]
+    ]
+    assert copied
+    assert [source for source in copied if source not in admitted] == []
+    assert "pip install -c constraints.txt" in (ROOT / "deploy" / "Dockerfile").read_text()
+
+
 def _cli(*args: str, env: dict[str, str]) -> subprocess.Popen[bytes]:
     return subprocess.Popen([sys.executable, "-m", "cli.main", *args], env=env, cwd=ROOT)
 
