@@ -11,6 +11,7 @@ from typing import Any, cast
 
 import redis
 import redis.asyncio as aioredis
+from redis.asyncio.retry import Retry as AsyncRetry
 from redis.backoff import ExponentialBackoff
 from redis.retry import Retry
 from redis.typing import EncodableT, FieldT
@@ -66,21 +67,22 @@ def sync_client(url: str, *, timeout: float, decode: bool = True) -> redis.Redis
 
     ``timeout`` bounds connecting and every reply; blocking reads must stay below it.
     """
-    return redis.Redis.from_url(url, decode_responses=decode, **_pool_options(timeout))
+    return redis.Redis.from_url(url, decode_responses=decode, **_pool_options(timeout, Retry))
 
 
 def async_client(url: str, *, timeout: float) -> aioredis.Redis:
     """A pooled asyncio client for the API (string replies)."""
-    return aioredis.Redis.from_url(url, decode_responses=True, **_pool_options(timeout))
+    return aioredis.Redis.from_url(url, decode_responses=True, **_pool_options(timeout, AsyncRetry))
 
 
-def _pool_options(timeout: float) -> dict[str, Any]:
-    """Timeouts, health checks and the one quick retry both clients share."""
+def _pool_options(timeout: float, retry: type[Retry] | type[AsyncRetry]) -> dict[str, Any]:
+    """Timeouts, health checks and the one quick retry both clients share; ``retry``: the
+    client's own Retry class (redis-py 8 warns when an asyncio client gets the sync one)."""
     return {
         "socket_timeout": timeout,
         "socket_connect_timeout": min(timeout, 5.0),
         "health_check_interval": 30,
-        "retry": Retry(ExponentialBackoff(cap=0.5, base=0.05), retries=1),
+        "retry": retry(ExponentialBackoff(cap=0.5, base=0.05), retries=1),
     }
 
 
