@@ -91,6 +91,7 @@ class SceneSpec:
     see_through: bool = False
     far_walls: float = 0.0
     ceiling_fraction: _Range = (0.0, 0.6)
+    no_ceiling_share: float = 0.0
     floor_reach_range: _Range = (2.0, 4.0)
     gap_range: _Range = (-0.3, 0.3)
     min_edge: float = 0.8
@@ -132,6 +133,8 @@ class SceneSpec:
             raise ValueError("reach_beyond and transient_clutter are (low, high) >= 0")
         if not 0.0 <= self.far_walls <= 1.0:
             raise ValueError("far_walls is a share of the doors, in [0, 1]")
+        if not 0.0 <= self.no_ceiling_share <= 1.0:
+            raise ValueError("no_ceiling_share is a share of the scans, in [0, 1]")
         if self.min_stretch <= 0.0 or -self.gap_range[0] >= self.min_stretch:
             raise ValueError("min_stretch must be > 0 and longer than the largest overlap")
 
@@ -190,15 +193,17 @@ class SceneSpec:
     def world(cls) -> SceneSpec:
         """As hard as scenes made outside the project: cuts anywhere (straight junctions,
         single-wall fragments, a few on corners), overlaps up to 0.5 m and gaps up to 0.3 m,
-        openings and furniture across cuts, real-looking room shapes, 2 to 16 fragments
-        (benchmarks set ``n_fragments_range`` per bucket) from scanners that differ in noise,
-        density, reach and clutter. A scan sees from nothing to 1 m of floor and furniture
-        past its stretch's ends, so neighbours may share no more than the wall they overlap
-        on (scenes made elsewhere share 0.2 m, median), and its floor 1 to 4 m deep; through
-        half the doors it sees the next room's far wall. Point
-        counts shrink for many fragments (at most 1.2 M points per scene)."""
+        openings and furniture across cuts, real-looking room shapes of real rooms' sizes
+        (3 to 10 by 3 to 13 m; the MatterportLayout outlines' median perimeter is 21 m, so
+        many fragments see a single wall), 2 to 16 fragments (benchmarks set
+        ``n_fragments_range`` per bucket) from scanners that differ in noise, density,
+        reach and clutter. A scan sees from nothing to 1 m of floor and furniture past its
+        stretch's ends, so neighbours may share no more than the wall they overlap on
+        (scenes made elsewhere share 0.2 m, median), and its floor 1 to 4 m deep; 30 % of
+        the scans see no ceiling; through half the doors a scan sees the next room's far
+        wall. Point counts shrink for many fragments (at most 1.2 M points per scene)."""
         return cls(
-            size_range=((2.0, 5.0), (18.0, 20.0)),
+            size_range=((3.0, 3.0), (10.0, 13.0)),
             n_fragments_range=(2, 16),
             noise_range=(0.005, 0.03),
             outlier_fraction=0.02,
@@ -207,6 +212,7 @@ class SceneSpec:
             clutter=1.5,
             see_through=True,
             ceiling_fraction=(0.0, 1.0),
+            no_ceiling_share=0.3,
             floor_reach_range=(1.0, 4.0),
             gap_range=(-0.5, 0.3),
             min_edge=0.5,
@@ -545,6 +551,8 @@ def _scan_style(rng: np.random.Generator, spec: SceneSpec) -> ScanStyle:
     )
     if spec.reach_beyond[1] > 0.0:
         style = dataclasses.replace(style, beyond=float(rng.uniform(*spec.reach_beyond)))
+    if spec.no_ceiling_share > 0.0 and rng.random() < spec.no_ceiling_share:
+        style = dataclasses.replace(style, ceiling_reach=0.0)
     return style
 
 

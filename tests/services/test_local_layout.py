@@ -112,7 +112,11 @@ def test_a_thin_cloud_of_a_large_room_is_read_on_cells_as_wide_as_its_points_lie
     # few points at most and its run broke into short pieces (the chain was 3.0 m off; 5 %
     # of the fragment's diagonal is 0.85 m, and the wider cells leave it 0.28 m off).
     spec = dataclasses.replace(
-        SceneSpec.world(), n_fragments_range=(2, 3), points_per_fragment=(8_000, 15_000)
+        SceneSpec.world(),
+        n_fragments_range=(2, 3),
+        points_per_fragment=(8_000, 15_000),
+        size_range=((2.0, 5.0), (18.0, 20.0)),  # the preset's rooms until 2026-12-05
+        no_ceiling_share=0.0,
     )
     fragment = generate_scene(spec, 7018).fragments[1]
     layout = estimate_local_layout(fragment.points)

@@ -245,7 +245,12 @@ def test_hidden_back_of_a_shallow_alcove_is_deduced():
 def test_a_histogram_peak_without_points_near_it_is_skipped():
     # Regression: a sparse world-preset fragment whose offset histogram peaked between its
     # points made find_wall_lines take the median of nothing and crash.
-    spec = dataclasses.replace(SceneSpec.world(), n_fragments_range=(9, 12))
+    spec = dataclasses.replace(
+        SceneSpec.world(),
+        n_fragments_range=(9, 12),
+        size_range=((2.0, 5.0), (18.0, 20.0)),  # the preset's rooms until 2026-12-05
+        no_ceiling_share=0.0,
+    )
     fragment = next(f for f in generate_scene(spec, 203008).fragments if f.id == "frag_01")
     layout = estimate_layout(fragment.points)
     assert layout.ok

@@ -114,6 +114,9 @@ def test_world_preset() -> None:
     assert world.reach_beyond == (0.0, 1.0) and world.clutter == 1.5
     assert world.floor_reach_range == (1.0, 4.0)
     assert world.see_through and world.far_walls == 0.5
+    assert world.size_range == ((3.0, 3.0), (10.0, 13.0)) and world.no_ceiling_share == 0.3
+    with pytest.raises(ValueError):
+        replace(world, no_ceiling_share=-0.1)
     with pytest.raises(ValueError):
         replace(world, far_walls=1.5)
     with pytest.raises(ValueError):
@@ -130,3 +133,21 @@ def test_a_sixteen_fragment_world_scene_takes_seconds() -> None:
     assert len(scene.fragments) == 16
     assert sum(len(f.points) for f in scene.fragments) <= spec.max_scene_points
     assert elapsed < 20.0
+
+
+def test_a_share_of_the_scans_sees_no_ceiling() -> None:
+    clean = replace(
+        WORLD, n_fragments_range=(4, 4), noise_range=(0.0, 0.0), outlier_fraction=0.0
+    )
+
+    def ceiling_points(spec: SceneSpec) -> list[int]:
+        scene = generate_scene(spec, 3)
+        counts = []
+        for f in scene.fragments:
+            z = f.points @ f.pose[2, :3] + f.pose[2, 3]  # world height
+            counts.append(int(np.count_nonzero(np.abs(z - scene.ceiling_z) < 1e-4)))
+        return counts
+
+    assert all(n == 0 for n in ceiling_points(replace(clean, no_ceiling_share=1.0)))
+    seen = replace(clean, no_ceiling_share=0.0, ceiling_fraction=(1.0, 1.0))
+    assert all(n > 0 for n in ceiling_points(seen))
