@@ -136,9 +136,7 @@ def test_a_sixteen_fragment_world_scene_takes_seconds() -> None:
 
 
 def test_a_share_of_the_scans_sees_no_ceiling() -> None:
-    clean = replace(
-        WORLD, n_fragments_range=(4, 4), noise_range=(0.0, 0.0), outlier_fraction=0.0
-    )
+    clean = replace(WORLD, n_fragments_range=(4, 4), noise_range=(0.0, 0.0), outlier_fraction=0.0)
 
     def ceiling_points(spec: SceneSpec) -> list[int]:
         scene = generate_scene(spec, 3)
