@@ -39,6 +39,10 @@ _NORMAL_RADIUS = 3.0  # neighbourhood radius for normals, in voxel sizes
 # points lie further apart than the voxels, and a point with fewer than two neighbours in
 # the radius gets no normal of its own (open3d leaves it pointing up, i.e. floor).
 _SPACING_RADIUS = 2.5
+# A point with fewer than this many points (itself included) within the normal radius has
+# no surface around it (an outlier, a reflection): open3d leaves its normal pointing up, and
+# up reads as floor, i.e. as space the scanner saw, and votes for the frame's axes.
+_NORMAL_NEIGHBOURS = 3
 _SPACING_SAMPLE = 2_000  # points whose nearest neighbour measures the spacing
 _DENSE_GRID = 1 << 22  # voxel grids up to this size are thinned by counting (32 MB)
 _DENSE_RATIO = 16  # ... when they hold at most this many voxels per point
@@ -80,8 +84,10 @@ class OrientedCloud:
 def thin_with_normals(
     points: FloatArray, params: ManhattanParams, max_voxels: int | None = None
 ) -> OrientedCloud:
-    """Thin to one point per voxel and estimate a normal for each, from the neighbours
-    within three voxels, or within 2.5 point spacings where the scan is sparser than that.
+    """Thin to one point per voxel, drop the points with no surface around them (fewer than
+    two others within the normals' radius: outliers, reflections), and estimate a normal
+    for each of the rest from its neighbours within three voxels, or within 2.5 point
+    spacings where the scan is sparser than that.
 
     Parameters
     ----------
@@ -96,13 +102,28 @@ def thin_with_normals(
     if max_voxels is not None and len(thinned) > max_voxels:
         size *= float(np.sqrt(len(thinned) / max_voxels))
         thinned = voxel_thin(thinned, size)
-    if len(thinned) < 3:
-        return OrientedCloud(thinned, np.tile([0.0, 0.0, 1.0], (len(thinned), 1)))
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(thinned))
     spacing = point_spacing(thinned) if len(thinned) > _SPARSE_SHARE * len(points) else 0.0
     radius = max(_NORMAL_RADIUS * size, _SPACING_RADIUS * spacing)
+    thinned = _on_surfaces(thinned, radius)
+    if len(thinned) < _NORMAL_NEIGHBOURS:
+        return OrientedCloud(thinned, np.tile([0.0, 0.0, 1.0], (len(thinned), 1)))
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(thinned))
     cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=24))
     return OrientedCloud(thinned, np.asarray(cloud.normals, dtype=np.float64), spacing)
+
+
+def _on_surfaces(points: FloatArray, radius: float) -> FloatArray:
+    """The points with at least ``_NORMAL_NEIGHBOURS`` points (themselves included) within
+    ``radius``, among those kept: a stray point whose few neighbours are stray too goes."""
+    while len(points) >= _NORMAL_NEIGHBOURS:
+        distances, _ = cKDTree(points).query(
+            points, k=_NORMAL_NEIGHBOURS, distance_upper_bound=radius
+        )
+        kept = np.isfinite(distances[:, -1])
+        if kept.all():
+            break
+        points = points[kept]
+    return points
 
 
 def voxel_thin(points: FloatArray, size: float) -> FloatArray:
