@@ -232,16 +232,24 @@ def _far_wall(
     out: FloatArray,
     density: float,
 ) -> FloatArray:
-    """The next room's wall facing a door, seen through it: parallel to the door's wall,
-    1-3 m behind it, whole height, and wider than the door the farther it stands (the view
-    widens past the jambs). ``mouth``: the door's outer corner at the floor; ``width``: the
-    door (its piece on the stretch) along its wall. Nothing inside the room itself."""
+    """The next room's wall facing a door, seen through it, and its floor up to that wall:
+    the wall parallel to the door's wall, 1-3 m behind it, whole height, and wider than the
+    door the farther it stands (the view widens past the jambs), the floor in that widening
+    view. ``mouth``: the door's outer corner at the floor; ``width``: the door (its piece on
+    the stretch) along its wall. Nothing inside the room itself."""
     far = float(rng.uniform(1.0, 3.0))
     spread = 0.5 * far / _VIEW_DEPTH * width  # past each jamb
     wall = _rect(
         rng, mouth + far * out - spread, width + 2 * spread, [0.0, 0.0, room.height], density
     )
-    return wall[~points_in_polygon(wall[:, :2], room.polygon)]
+    floor = _rect(rng, mouth - spread, width + 2 * spread, far * out, density)
+    # Across the door from its middle, and out from its wall: the view widens with depth.
+    door = float(np.linalg.norm(width))
+    across = np.abs((floor - mouth - 0.5 * width) @ (width / door))
+    depth = (floor - mouth) @ out
+    floor = floor[across <= 0.5 * door * (1.0 + depth / _VIEW_DEPTH)]
+    seen = np.vstack([wall, floor])
+    return seen[~points_in_polygon(seen[:, :2], room.polygon)]
 
 
 def _visible_intervals(room: Room, e: int, stretch: Stretch) -> list[tuple[float, float]]:

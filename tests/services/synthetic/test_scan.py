@@ -91,3 +91,8 @@ def test_through_a_door_a_scan_may_see_the_next_rooms_far_wall():
     assert len(depth) == 1 and -3.2 - 1e-9 <= depth[0] <= -1.2 + 1e-9, "one plane"
     assert wall[:, 2].max() > 2.3, "the whole height, not the door's"
     assert wall[:, 0].min() < 2.0 and wall[:, 0].max() > 2.9, "wider than the door"
+    # The next room's floor is seen up to that wall, in a view that widens past the jambs.
+    floor = points[(np.abs(points[:, 2]) < 1e-9) & (points[:, 1] < -0.2 - 1e-9)]
+    assert floor[:, 1].min() < depth[0] + 0.2, "the floor reaches the far wall"
+    deep = floor[floor[:, 1] < depth[0] + 0.5]
+    assert len(deep) > 20 and (deep[:, 0].min() < 2.0 or deep[:, 0].max() > 2.9), "widening"
