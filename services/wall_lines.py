@@ -505,7 +505,7 @@ def _lines_from_peak(
     for sign, near_side, far_side in ((1, front, behind), (-1, behind, front)):
         high = tall & (far_side <= _BEHIND_RATIO * np.maximum(near_side, 1.0))
         spans = _runs(high, _MAX_GAP_CELLS, params.min_wall_cells)
-        if not spans:
+        if not spans or (not rule.views and _faces_away(spans, near_side, far_side, occupied)):
             continue
         segments = np.array([[origin + a * s, origin + b * s] for a, b in spans])
         # Interior on the left: along x, interior +y means travelling +x; along y,
@@ -774,6 +774,25 @@ def find_wall_lines(
     lines = [line for line in lines if not _seen_through_opening(line, lines)]
     camera = views[0].centre[:2] if len(views) == 1 else None
     return lines + _occluded_links(lines, grid, camera)
+
+
+def _faces_away(
+    spans: Sequence[tuple[int, int]],
+    near_side: FloatArray,
+    far_side: FloatArray,
+    occupied: NDArray[np.bool_],
+) -> bool:
+    """Whether a cloud's wall, its interior on the near side, shows space only behind it.
+
+    Nowhere along its spans is space seen in front of it, and somewhere along the wall
+    (``occupied``: cells holding its points) space is seen behind it. The next room's wall
+    seen through a door is seen from the front, where the floor through the door lies, and
+    not at all from behind; beside the view through the door, nothing shows on either side
+    of it, and it would pass for a wall of a room lying behind it. (A scan of walls alone
+    shows space on neither side and keeps every wall.)"""
+    if any(np.any(near_side[a:b] >= _SUPPORT_POINTS) for a, b in spans):
+        return False
+    return bool(np.any(far_side[occupied] >= _SUPPORT_POINTS))
 
 
 def _axis_lines(

@@ -579,6 +579,31 @@ def test_a_wall_seen_through_a_door_is_the_next_rooms(lintel: bool) -> None:
         np.testing.assert_allclose(chain.keypoints, [[0.0, 3.0], [0.0, 0.0], [3.0, 0.0]], atol=0.1)
 
 
+def test_a_wall_with_space_seen_only_behind_it_faces_that_space() -> None:
+    # A 1.4 m wall at y = 0 (interior +y) that is mostly a door (x from 0.3 to 1.3, wall over
+    # it from 2 m); through it the next room's floor, widening, up to its wall 2.5 m behind,
+    # which is 3.2 m long: beside the view through the door nothing shows on either side of
+    # that wall. Taken with its interior away from the door it passed for a wall of a room
+    # behind it, and was the longest wall the scan had.
+    rng = np.random.default_rng(6)
+    fan = rng.uniform([-0.9, -2.5, 0], [2.5, -0.15, 0], (5000, 3))
+    depth = -fan[:, 1]
+    fan = fan[(fan[:, 0] > 0.3 - 0.4 * depth) & (fan[:, 0] < 1.3 + 0.4 * depth)]
+    points, normals = _scene(
+        [
+            _surface(rng, [0, 0, 0], [0.3, 0, 2.6], [0, 1, 0], 500),
+            _surface(rng, [1.3, 0, 0], [1.4, 0, 2.6], [0, 1, 0], 200),
+            _surface(rng, [0.3, 0, 2.0], [1.3, 0, 2.6], [0, 1, 0], 500),
+            _surface(rng, [-0.9, -2.5, 0], [2.3, -2.5, 2.6], [0, 1, 0], 6000),
+            _surface(rng, [-0.2, 0, 0], [1.6, 2.0, 0], [0, 0, 1], 4000),
+            (fan, np.tile([0.0, 0.0, 1.0], (len(fan), 1))),
+        ]
+    )
+    lines = find_wall_lines(points, normals, 0.0, 2.6, LayoutParams())
+    far = [ln for ln in lines if ln.axis == 0 and not ln.virtual and abs(ln.offset + 2.5) < 0.05]
+    assert far and all(ln.travel == 1 for ln in far), [ln.travel for ln in far]
+
+
 def _notch_beside_a_door(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """A wall along x at y = 0 (interior +y, x from 0 to 6) with a notch out of the room
     (x from 1.9 to 2.5, 0.8 m deep) and a door from x = 3.0 to 3.9 (wall over it from 2 m);
