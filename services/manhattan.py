@@ -84,10 +84,10 @@ class OrientedCloud:
 def thin_with_normals(
     points: FloatArray, params: ManhattanParams, max_voxels: int | None = None
 ) -> OrientedCloud:
-    """Thin to one point per voxel, drop the points with no surface around them (fewer than
-    two others within the normals' radius: outliers, reflections), and estimate a normal
-    for each of the rest from its neighbours within three voxels, or within 2.5 point
-    spacings where the scan is sparser than that.
+    """Thin to one point per voxel, estimate a normal for each from its neighbours within
+    three voxels, or within 2.5 point spacings where the scan is sparser than that, and
+    drop the points with no surface around them (fewer than two others within that radius:
+    outliers, reflections).
 
     Parameters
     ----------
@@ -102,28 +102,23 @@ def thin_with_normals(
     if max_voxels is not None and len(thinned) > max_voxels:
         size *= float(np.sqrt(len(thinned) / max_voxels))
         thinned = voxel_thin(thinned, size)
-    spacing = point_spacing(thinned) if len(thinned) > _SPARSE_SHARE * len(points) else 0.0
-    radius = max(_NORMAL_RADIUS * size, _SPACING_RADIUS * spacing)
-    thinned = _on_surfaces(thinned, radius)
     if len(thinned) < _NORMAL_NEIGHBOURS:
         return OrientedCloud(thinned, np.tile([0.0, 0.0, 1.0], (len(thinned), 1)))
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(thinned))
+    spacing = point_spacing(thinned) if len(thinned) > _SPARSE_SHARE * len(points) else 0.0
+    radius = max(_NORMAL_RADIUS * size, _SPACING_RADIUS * spacing)
     cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=24))
-    return OrientedCloud(thinned, np.asarray(cloud.normals, dtype=np.float64), spacing)
-
-
-def _on_surfaces(points: FloatArray, radius: float) -> FloatArray:
-    """The points with at least ``_NORMAL_NEIGHBOURS`` points (themselves included) within
-    ``radius``, among those kept: a stray point whose few neighbours are stray too goes."""
-    while len(points) >= _NORMAL_NEIGHBOURS:
-        distances, _ = cKDTree(points).query(
-            points, k=_NORMAL_NEIGHBOURS, distance_upper_bound=radius
+    normals = np.asarray(cloud.normals, dtype=np.float64)
+    # Only a point open3d left pointing up can be stray: the others had neighbours enough.
+    up = np.flatnonzero((normals[:, 0] == 0.0) & (normals[:, 1] == 0.0) & (normals[:, 2] == 1.0))
+    if len(up):
+        distances, _ = cKDTree(thinned, balanced_tree=False, compact_nodes=False).query(
+            thinned[up], k=_NORMAL_NEIGHBOURS, distance_upper_bound=radius
         )
-        kept = np.isfinite(distances[:, -1])
-        if kept.all():
-            break
-        points = points[kept]
-    return points
+        kept = np.ones(len(thinned), dtype=bool)
+        kept[up[np.isinf(distances[:, -1])]] = False
+        thinned, normals = thinned[kept], normals[kept]
+    return OrientedCloud(thinned, normals, spacing)
 
 
 def voxel_thin(points: FloatArray, size: float) -> FloatArray:
