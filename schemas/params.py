@@ -354,6 +354,23 @@ class PlacementParams(_Frozen):
         le=1,
         description="the most such a room's confidence can be (below closed_confidence)",
     )
+    implausible_hints_odds: float = Field(
+        0.001,
+        gt=0,
+        le=1,
+        description="with prior poses: a prior the main room misses by so much that honest "
+        "priors (as wide as their standard deviations say) would miss by as much less often "
+        "than this, over all the site's priors, is implausible; a room with two or more such "
+        "is not said closed (one is a fleet's mistake as likely as the room's). A room of the "
+        "test split was closed at 0.990 with two priors 5 and 6 standard deviations off, its "
+        "notch 2.3 m from where it is",
+    )
+    contradicted_hints_confidence: float = Field(
+        0.98,
+        ge=0,
+        le=1,
+        description="the most such a room's confidence can be (below closed_confidence)",
+    )
     truncated_search_confidence: float = Field(
         0.98,
         ge=0,

@@ -9,6 +9,7 @@ CLI), merging overlapping ones first, and returns the layouts with the result.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -408,6 +409,36 @@ def _check_search(
     return _capped(main, params.placement.truncated_search_confidence), True
 
 
+def _check_hints(
+    main: _Placed, hints: SiteHints, layouts: Mapping[str, LocalLayout], params: PipelineParams
+) -> tuple[_Placed, list[str]]:
+    """The main room with its confidence capped when it misses two or more prior poses by
+    more than honest priors would, and those fragments (empty when not capped).
+
+    A prior missed by k of its standard deviations in position happens exp(-k^2 / 2) of the
+    time (two axes), in yaw erfc(k / sqrt 2); a miss is implausible when that, times the
+    number of priors, is under ``implausible_hints_odds``. One such prior is a fleet's
+    mistake as likely as the room's (a robot whose localisation jumped), and the scans win.
+    Two or more, each off its own way, say the room is wrong: the search weighs a
+    contradicted prior only so much (a hint is not obeyed blindly), so a wrong room can win
+    on the scans' other terms."""
+    if main.assembly is None or len(hints.priors) < 2:
+        return main, []
+    hinted = _to_hints_frame(main, hints, layouts)
+    chances = {}
+    for fid, prior in hints.priors.items():
+        if fid in hinted.poses:
+            yaw, source = chain_placement(layouts[fid], hinted.poses[fid])
+            position = float(np.linalg.norm(source - prior.source)) / prior.source_sigma
+            turn = abs(wrap_angle(yaw - prior.yaw)) / prior.sigma_yaw
+            chances[fid] = min(math.exp(-0.5 * position**2), math.erfc(turn / math.sqrt(2.0)))
+    odds = params.placement.implausible_hints_odds / max(len(chances), 1)
+    implausible = sorted(fid for fid, chance in chances.items() if chance < odds)
+    if len(implausible) < 2:
+        return main, []
+    return _capped(main, params.placement.contradicted_hints_confidence), implausible
+
+
 def _check_conflict(main: _Placed, params: PipelineParams) -> tuple[_Placed, float]:
     """The main room with its confidence capped when ``conflict_wall_limit`` or more of its
     walls run through space another scan saw empty, and those meters (0 when under the
@@ -426,6 +457,7 @@ def _doubts(
     conflicting: float,
     slid: int,
     cut_short: bool,
+    implausible: Sequence[str] = (),
 ) -> dict[str, Any]:
     """The diagnostics that say why a room that closes is not said closed (only those that
     apply)."""
@@ -440,6 +472,9 @@ def _doubts(
         doubts["slid_alternatives"] = slid  # the runners-up are this room resized
     if cut_short:
         doubts["search_cut_short"] = True  # rivals may lie beyond the search's budget
+    if implausible:
+        # Honest priors miss the room by as much this rarely: it is wrong, or they all are.
+        doubts["hints_implausible"] = list(implausible)
     if main.polygon is not None and not main.rectilinear:
         doubts["floorplan_not_rectilinear"] = True
     return doubts
@@ -601,6 +636,7 @@ def place_site(
     main, unexplained = _check_walls(_check_refinement(main, params), layouts, params)
     main, conflicting = _check_conflict(main, params)
     main, cut_short = _check_search(main, placement, site_hints, params)
+    main, implausible = _check_hints(main, site_hints, layouts, params)
     if main.assembly is not None:
         # The checks doubt the main room on what its floorplan shows, which its runners-up
         # were not put to: none is reported likelier (the main fields hold the most
@@ -637,7 +673,9 @@ def place_site(
     # What the chains rest on: frames and thin clouds lower the confidence (its maps per kind).
     kinds = [layouts[fid].evidence for fid in usable]
     diagnostics["evidence"] = {kind: kinds.count(kind) for kind in sorted(set(kinds))}
-    diagnostics.update(_doubts(main, status, unexplained, conflicting, slid, cut_short))
+    diagnostics.update(
+        _doubts(main, status, unexplained, conflicting, slid, cut_short, implausible)
+    )
     report("done", 1.0)
     return ResultModel(
         status=status,

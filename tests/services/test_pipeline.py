@@ -310,12 +310,18 @@ def _pose_errors(result: ResultModel, scene) -> dict[str, tuple[float, float]]:
     return out
 
 
-def _true_priors(scene, moved: str | None = None, by: float = 10.0) -> HintsModel:
+def _true_priors(
+    scene, moved: str | None = None, by: float = 10.0, also: str | None = None
+) -> HintsModel:
+    """The true poses as priors of 1.5 m and 20 deg; ``moved`` ``by`` meters along x, and
+    ``also`` as far along y."""
     fragments = {}
     for truth in scene.fragments:
         pose = truth.pose.copy()
         if truth.id == moved:
             pose[0, 3] += by
+        if truth.id == also:
+            pose[1, 3] += by
         fragments[truth.id] = FragmentPrior(pose=pose.tolist(), sigma_xy=1.5, sigma_yaw_deg=20)
     return HintsModel(fragments=fragments)
 
@@ -456,6 +462,19 @@ def test_a_contradicted_prior_is_reported():
     assert result.status == "closed"
     reported = [h for h in result.diagnostics["hints_contradicted"] if h["kind"] == "pose"]
     assert [moved] in [h["fragments"] for h in reported]
+
+
+def test_a_room_two_priors_contradict_each_their_own_way_is_not_closed():
+    # One prior far off is a fleet's mistake as likely as the room's, and the scans win
+    # (above); two, each off its own way, are not: either the room or the hints are wrong.
+    scene = small_scene("easy", 0)
+    first, second = scene.fragments[1].id, scene.fragments[2].id
+    result = place_site(scene_layouts(), hints=_true_priors(scene, moved=first, also=second))
+    assert result.status != "closed"
+    assert result.confidence <= PipelineParams().placement.contradicted_hints_confidence
+    assert result.diagnostics["hints_implausible"] == sorted([first, second])
+    single = place_site(scene_layouts(), hints=_true_priors(scene, moved=first))
+    assert "hints_implausible" not in single.diagnostics
 
 
 def test_a_contradicted_prior_does_not_move_the_others():
