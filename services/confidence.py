@@ -2,10 +2,12 @@
 
 The search returns its best few assemblies with energies (negative log-likelihoods up to a
 constant; the weights are fitted, ``bench/tune_placement.py``). Assemblies whose floorplans
-are the same room (mean keypoint distance under a small share of the diagonal: swapped
-look-alike pieces, a jog placed either side of a cut) are one answer, and their Boltzmann
-shares add up. A 'none of these' share stands for everything the search did not return (a
-wrong local layout, an assembly beyond the node budget).
+are the same room (mean keypoint distance under a small share of the diagonal: a jog placed
+either side of a cut) and that place every fragment alike are one answer, and their
+Boltzmann shares add up; swapped look-alike pieces draw the same floorplan but are two
+answers, since the fleet acts on each scan's pose. A 'none of these' share stands for
+everything the search did not return (a wrong local layout, an assembly beyond the node
+budget).
 
 The shares rank the rooms; how far to trust the first one also depends on what they do not
 see (how many pieces, how well the loop closes, whether the search finished), so the main
@@ -93,26 +95,66 @@ class Assembly:
 def same_room_groups(
     pieces: Sequence[Piece], candidates: Sequence[PlacementCandidate], share: float
 ) -> tuple[list[int], list[FloatArray], list[FloatArray]]:
-    """Group complete candidates by room, lowest energy first.
+    """Group complete candidates by answer, lowest energy first.
 
     Returns (group index per candidate, the unrefined translations and floorplan of each
     group's first candidate). A candidate joins the first group whose floorplan is within
-    ``share`` of the diagonal of its own.
+    ``share`` of the diagonal of its own and that places every fragment alike: the same
+    quarter turns, sources within ``share`` of that diagonal (as
+    :func:`fragment_confidences` compares them). The same floorplan with fragments placed
+    elsewhere in it (a piece on another wall that looks alike) is another map for the fleet.
     """
     by_id = {p.id: p for p in pieces}
     groups: list[int] = []
     translations: list[FloatArray] = []
     polygons: list[FloatArray] = []
+    placements: list[dict[str, tuple[int, FloatArray]]] = []
     for cand in candidates:
         moved = translations_of(pieces, cand)
         polygon = build_polygon([by_id[fid] for fid in cand.order], cand.rotations, moved)
-        match = next((g for g, p in enumerate(polygons) if same_room(polygon, p, share)), None)
+        placed = _placements(cand, moved)
+        match = next(
+            (
+                g
+                for g, p in enumerate(polygons)
+                if same_room(polygon, p, share)
+                and _placed_alike(placed, placements[g], share * floorplan_diagonal(p))
+            ),
+            None,
+        )
         if match is None:
             match = len(polygons)
             translations.append(moved)
             polygons.append(polygon)
+            placements.append(placed)
         groups.append(match)
     return groups, translations, polygons
+
+
+def _placements(
+    cand: PlacementCandidate, translations: FloatArray
+) -> dict[str, tuple[int, FloatArray]]:
+    """Fragment id -> (quarter turns, source position) of a candidate, search frame."""
+    return {
+        fid: (rotation, translations[k])
+        for k, (fid, rotation) in enumerate(zip(cand.order, cand.rotations, strict=True))
+    }
+
+
+def _placed_alike(
+    a: Mapping[str, tuple[int, FloatArray]],
+    b: Mapping[str, tuple[int, FloatArray]],
+    tolerance: float,
+) -> bool:
+    """Every fragment of ``a`` with the same quarter turns in ``b`` and its source within
+    ``tolerance`` (m) of its place there."""
+    for fid, (rotation, source) in a.items():
+        other = b.get(fid)
+        if other is None or other[0] != rotation:
+            return False
+        if float(np.linalg.norm(other[1] - source)) > tolerance:
+            return False
+    return True
 
 
 def calibration_features(
@@ -280,25 +322,16 @@ def fragment_confidences(
     in every assembly (so its own confidence is the mass of all the rooms found).
     """
     tolerance = share * floorplan_diagonal(main.polygon)
-    reference = _poses(main)
+    reference = _placements(main.candidate, main.translations)
     out = dict.fromkeys(reference, 0.0)
     for assembly in assemblies:
-        poses = _poses(assembly)
+        poses = _placements(assembly.candidate, assembly.translations)
         for fid, (rotation, source) in reference.items():
             other_rotation, other_source = poses.get(fid, (None, source))
             moved = float(np.linalg.norm(other_source - source))
             if other_rotation == rotation and moved <= tolerance:
                 out[fid] += assembly.probability
     return {fid: min(1.0, value) for fid, value in out.items()}
-
-
-def _poses(assembly: Assembly) -> dict[str, tuple[int, FloatArray]]:
-    """Fragment id -> (quarter turns, source position) of an assembly, search frame."""
-    cand = assembly.candidate
-    return {
-        fid: (rotation, assembly.translations[k])
-        for k, (fid, rotation) in enumerate(zip(cand.order, cand.rotations, strict=True))
-    }
 
 
 def same_room(a: FloatArray, b: FloatArray, share: float) -> bool:

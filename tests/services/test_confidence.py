@@ -47,16 +47,22 @@ def test_probabilities_are_sorted_and_leave_room_for_none_of_these(l_room):
     assert first.candidate == placement.best
 
 
-def test_swapped_identical_pieces_are_one_room():
-    # A square cut into a U and two identical L pieces: p0 p1 p2 and p0 p2 p1 are the same
-    # room, so they make one answer with both placements' weight.
+def test_swapped_identical_pieces_are_two_answers_of_one_floorplan():
+    # A square cut into a U and two identical L pieces: p0 p1 p2 and p0 p2 p1 draw the same
+    # floorplan, yet put the scans of p1 and p2 in each other's place: a fleet acting on
+    # either map moves a robot to the wrong corner half the time, so neither is sure.
     _, placement, assemblies = _ranked(SQUARE, [2.0, 10.0, 14.0])
     assert len(placement.candidates) == 2
-    assert len(assemblies) == 1
-    (only,) = assemblies
-    assert only.members == 2
+    assert len(assemblies) == 2
+    first, second = assemblies
+    assert first.members == second.members == 1
+    assert {first.candidate.order, second.candidate.order} == {
+        ("p0", "p1", "p2"),
+        ("p0", "p2", "p1"),
+    }
+    assert np.allclose(first.polygon, second.polygon)
     unexplored = math.exp(-GEOMETRY.unexplored_energy)
-    assert only.probability == pytest.approx(2.0 / (2.0 + unexplored))
+    assert first.probability == pytest.approx(1.0 / (2.0 + unexplored))
 
 
 def test_different_rooms_at_equal_energy_stay_apart(l_room):
@@ -69,10 +75,12 @@ def test_different_rooms_at_equal_energy_stay_apart(l_room):
 
 
 def test_same_room_share_decides_what_is_one_room(l_room):
-    params = GEOMETRY.model_copy(update={"same_room_share": 10.0})  # everything is one room
+    # So wide a share makes one answer of every placement that turns each fragment alike.
+    params = GEOMETRY.model_copy(update={"same_room_share": 10.0})
     _, placement, assemblies = _ranked(l_room, [1.0, 9.5, 14.0, 20.0], params)
-    assert len(assemblies) == 1
-    assert assemblies[0].members == len(placement.candidates) > 1
+    turns = {frozenset(zip(c.order, c.rotations, strict=True)) for c in placement.candidates}
+    assert len(assemblies) == len(turns) < len(placement.candidates)
+    assert sum(a.members for a in assemblies) == len(placement.candidates)
 
 
 def test_assembly_geometry_is_the_candidate_room(l_room):
