@@ -146,15 +146,18 @@ def _placed_alike(
     b: Mapping[str, tuple[int, FloatArray]],
     tolerance: float,
 ) -> bool:
-    """Every fragment of ``a`` with the same quarter turns in ``b`` and its source within
-    ``tolerance`` (m) of its place there."""
-    for fid, (rotation, source) in a.items():
-        other = b.get(fid)
-        if other is None or other[0] != rotation:
-            return False
-        if float(np.linalg.norm(other[1] - source)) > tolerance:
-            return False
-    return True
+    """Every fragment of ``a`` in the same place in ``b`` (:func:`_same_place`)."""
+    return all(_same_place(pose, b.get(fid), tolerance) for fid, pose in a.items())
+
+
+def _same_place(
+    pose: tuple[int, FloatArray], other: tuple[int, FloatArray] | None, tolerance: float
+) -> bool:
+    """One fragment's (quarter turns, source) alike in two assemblies: the same turns, the
+    sources within ``tolerance`` (m); never when the other does not place it."""
+    if other is None or other[0] != pose[0]:
+        return False
+    return float(np.linalg.norm(other[1] - pose[1])) <= tolerance
 
 
 def calibration_features(
@@ -326,10 +329,8 @@ def fragment_confidences(
     out = dict.fromkeys(reference, 0.0)
     for assembly in assemblies:
         poses = _placements(assembly.candidate, assembly.translations)
-        for fid, (rotation, source) in reference.items():
-            other_rotation, other_source = poses.get(fid, (None, source))
-            moved = float(np.linalg.norm(other_source - source))
-            if other_rotation == rotation and moved <= tolerance:
+        for fid, pose in reference.items():
+            if _same_place(pose, poses.get(fid), tolerance):
                 out[fid] += assembly.probability
     return {fid: min(1.0, value) for fid, value in out.items()}
 
