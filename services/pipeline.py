@@ -258,6 +258,21 @@ def _to_hints_frame(
     return dataclasses.replace(placed, poses=poses, polygon=polygon)
 
 
+def _prior_misses(
+    placed: _Placed, hints: SiteHints, layouts: Mapping[str, LocalLayout]
+) -> dict[str, tuple[float, float]]:
+    """Per placed fragment with a prior pose: how far its chain's source lies from the
+    prior's (m) and its yaw from the prior's (radians, absolute), ``placed`` in the hints'
+    frame."""
+    out = {}
+    for fid, prior in hints.priors.items():
+        if fid in placed.poses:
+            yaw, source = chain_placement(layouts[fid], placed.poses[fid])
+            distance = float(np.linalg.norm(source - prior.source))
+            out[fid] = (distance, abs(wrap_angle(yaw - prior.yaw)))
+    return out
+
+
 def _contradicted_hints(
     placed: _Placed, hints: SiteHints, layouts: Mapping[str, LocalLayout]
 ) -> list[dict[str, Any]]:
@@ -266,12 +281,8 @@ def _contradicted_hints(
         {"kind": "order" if pair.directed else "neighbours", "fragments": [pair.a, pair.b]}
         for pair in placed.candidate.violated_pairs
     ]
-    for fid, prior in hints.priors.items():
-        if fid not in placed.poses:
-            continue
-        yaw, source = chain_placement(layouts[fid], placed.poses[fid])
-        distance = float(np.linalg.norm(source - prior.source))
-        yaw_error = abs(wrap_angle(yaw - prior.yaw))
+    for fid, (distance, yaw_error) in _prior_misses(placed, hints, layouts).items():
+        prior = hints.priors[fid]
         if distance > 3 * prior.source_sigma or yaw_error > 3 * prior.sigma_yaw:
             out.append(
                 {
@@ -424,14 +435,13 @@ def _check_hints(
     on the scans' other terms."""
     if main.assembly is None or len(hints.priors) < 2:
         return main, []
-    hinted = _to_hints_frame(main, hints, layouts)
     chances = {}
-    for fid, prior in hints.priors.items():
-        if fid in hinted.poses:
-            yaw, source = chain_placement(layouts[fid], hinted.poses[fid])
-            position = float(np.linalg.norm(source - prior.source)) / prior.source_sigma
-            turn = abs(wrap_angle(yaw - prior.yaw)) / prior.sigma_yaw
-            chances[fid] = min(math.exp(-0.5 * position**2), math.erfc(turn / math.sqrt(2.0)))
+    for fid, (distance, yaw_error) in _prior_misses(
+        _to_hints_frame(main, hints, layouts), hints, layouts
+    ).items():
+        position = distance / hints.priors[fid].source_sigma
+        turn = yaw_error / hints.priors[fid].sigma_yaw
+        chances[fid] = min(math.exp(-0.5 * position**2), math.erfc(turn / math.sqrt(2.0)))
     odds = params.placement.implausible_hints_odds / max(len(chances), 1)
     implausible = sorted(fid for fid, chance in chances.items() if chance < odds)
     if len(implausible) < 2:
