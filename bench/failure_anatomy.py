@@ -23,6 +23,8 @@ Run ``python -m bench.failure_anatomy`` (``--split``, ``--per-bucket``, ``--real
 the layouts ``bench.placement_trust`` caches and builds those missing. With ``--frames
 CAMERA`` it looks at rendered RGB-D frame rooms instead (``bench.rgbd_frames``: each frame
 laid out on its own; ``--seed``, ``--scenes``, ``--shapes``), bucketed by frames per room.
+With ``--priors M DEG`` every room gets prior poses drawn as ``bench.placement_trust``
+draws them, and the truth is scored with them too.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from rich import box
 from rich.console import Console
 from rich.table import Table
 
+from bench.placement_trust import noisy_priors
 from bench.rgbd_frames import cached_scenes, outlines_for_seeds
 from bench.scoring import add_params_option, chain_error_in_plan, params_with, true_assembly
 from bench.world_scenes import (
@@ -51,9 +54,10 @@ from bench.world_scenes import (
     load_set,
     scene_jobs,
 )
+from schemas.hints import HintsModel
 from schemas.params import PipelineParams
 from services.evaluation import evaluate_result
-from services.pipeline import place_site
+from services.pipeline import place_site, root_first, site_hints_of
 from services.placement import evaluate_placement, make_piece
 from services.placement.energy import FEATURES, feature_weights
 from services.stations import counts_stations, with_station_scored
@@ -86,9 +90,12 @@ class Anatomy:
     terms: dict[str, float] = field(default_factory=dict)
 
 
-def anatomy_of(scene: CachedScene, params: PipelineParams) -> Anatomy:
-    """Place one scene and, when its main room is wrong, say why."""
-    result = place_site(scene.layouts, params).model_dump(mode="json")
+def anatomy_of(
+    scene: CachedScene, params: PipelineParams, hints: HintsModel | None = None
+) -> Anatomy:
+    """Place one scene (with ``hints`` when given) and, when its main room is wrong, say
+    why; the truth is then scored with the same hints."""
+    result = place_site(scene.layouts, params, hints=hints).model_dump(mode="json")
     report = evaluate_result(result, scene.truth)
     base = Anatomy(
         scene.name, scene.seed, scene.n_fragments, report.global_correct, result["status"], None
@@ -98,9 +105,12 @@ def anatomy_of(scene: CachedScene, params: PipelineParams) -> Anatomy:
     usable = sorted(fid for fid, lay in scene.layouts.items() if lay.ok)
     if len(usable) < scene.n_fragments or not _chains_right_in_plan(result, scene.truth):
         return _with(base, "layout")
-    pieces = [make_piece(fid, scene.layouts[fid]) for fid in usable]
-    order, rotations = true_assembly(scene.truth, scene.layouts, usable)
-    truth = evaluate_placement(pieces, order, rotations, params.placement)
+    layouts = {fid: lay.snapped() for fid, lay in scene.layouts.items()}
+    site_hints = site_hints_of(layouts, usable, hints)
+    usable = root_first(usable, site_hints)
+    pieces = [make_piece(fid, layouts[fid]) for fid in usable]
+    order, rotations = true_assembly(scene.truth, layouts, usable)
+    truth = evaluate_placement(pieces, order, rotations, params.placement, site_hints)
     if truth is None:
         return _with(base, "not a loop")
     if counts_stations(pieces, params.placement):
@@ -222,6 +232,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=2000, help="frames: first seed (tune 2000+)")
     parser.add_argument("--scenes", type=int, default=60, help="frames: rooms")
     parser.add_argument("--shapes", action="store_true", help="frames: real room shapes")
+    parser.add_argument(
+        "--priors",
+        type=float,
+        nargs=2,
+        metavar=("M", "DEG"),
+        help="with prior poses of these standard deviations (bench.placement_trust's)",
+    )
     add_params_option(parser)
     args = parser.parse_args(argv)
     console = Console(width=None if sys.stdout.isatty() else 160)
@@ -232,7 +249,10 @@ def main(argv: list[str] | None = None) -> int:
         jobs = scene_jobs(args.split, args.per_bucket, args.real, DEFAULT_CACHE)
         build_sets(jobs, args.workers, lambda line: console.log(f"layouts {line}"))
         scenes = list(load_set(jobs))
-    rows = [anatomy_of(scene, params) for scene in scenes]
+    rows = [
+        anatomy_of(scene, params, noisy_priors(scene, *args.priors) if args.priors else None)
+        for scene in scenes
+    ]
     if args.list:
         by_cause: dict[str, list[str]] = defaultdict(list)
         for r in rows:

@@ -75,6 +75,8 @@ __all__ = [
     "estimate_layout",
     "fragment_pose",
     "place_site",
+    "root_first",
+    "site_hints_of",
 ]
 
 
@@ -127,9 +129,10 @@ class _Placed:
     rectilinear: bool = True
 
 
-def _site_hints(
+def site_hints_of(
     layouts: Mapping[str, LocalLayout], usable: Sequence[str], hints: HintsModel | None
 ) -> SiteHints:
+    """The hints of fragments ``usable`` resolved to their pieces (priors on their chains)."""
     if hints is None:
         return SiteHints()
     priors = {
@@ -140,7 +143,7 @@ def _site_hints(
     return SiteHints(priors, hint_pairs(hints.neighbours, hints.order))
 
 
-def _root_first(usable: list[str], hints: SiteHints) -> list[str]:
+def root_first(usable: list[str], hints: SiteHints) -> list[str]:
     """The fixed first piece: with priors, the most certain one (the site frame then
     follows the hints' frame most closely); else the first fragment."""
     if not hints.priors:
@@ -621,12 +624,11 @@ def place_site(
         for fid, lay in layouts.items()
     }
     usable = [fid for fid, lay in layouts.items() if lay.ok]
-    site_hints = _site_hints(layouts, usable, hints)
+    site_hints = site_hints_of(layouts, usable, hints)
     report("placement", 0.1)
     # The search starts from the smallest id, not the first upload: the same fragments give
     # the same answer (and site frame) whatever order they arrived in.
-    root_first = _root_first(sorted(usable), site_hints)
-    pieces = {fid: make_piece(fid, layouts[fid]) for fid in root_first}
+    pieces = {fid: make_piece(fid, layouts[fid]) for fid in root_first(sorted(usable), site_hints)}
     placement = place_pieces(list(pieces.values()), params.placement, site_hints)
     if placement is not None:
         placement = with_station_cost(
