@@ -66,6 +66,9 @@ MAX_DOORWAY = 2.0
 _RECESS_DEPTH = 0.3  # m, a wall reaching this far behind a gap's edge: a recess, not a door
 _MIN_DOORWAY = 0.3  # m, least doorway a wall's end is carried across
 _MIN_HIDDEN_WALL = 0.6  # m, least wall seen only over tall furniture a wall's end runs on along
+# m, longest stretch of partly hidden wall (points at some height only) a wall's end is
+# carried across to a lintel past it
+_MAX_HIDDEN_LEAD = 1.0
 _LINTEL_BINS = 3  # height bins a column seen only high up must hold to count as wall
 _LINTEL_LOW = 1.6  # m over the floor: a column whose wall points all stand higher is wall over
 # an opening (a lintel) or over tall furniture (wardrobes, shelves, fridges: 1.6 m and up)
@@ -127,6 +130,8 @@ class WallLine:
         if self.seen_through is None or self.lintel is None:
             return 0.0
         first = int(np.rint((run - self.origin) / self.cell_size)) - (outward < 0)
+        lead = self._hidden_lead(first, outward)
+        first += outward * lead
         limit = int(np.ceil(MAX_DOORWAY / self.cell_size)) + _MAX_GAP_CELLS + 1
         span = _run_ahead(self.lintel, first, outward, limit)
         if span is None:
@@ -136,7 +141,21 @@ class WallLine:
         least = _MIN_DOORWAY if doorway else _MIN_HIDDEN_WALL
         if (stop - start) * self.cell_size < least or stop * self.cell_size > MAX_DOORWAY:
             return 0.0
-        return stop * self.cell_size
+        return (lead + stop) * self.cell_size
+
+    def _hidden_lead(self, first: int, outward: int) -> int:
+        """Cells from ``first`` on (walking ``outward``) where the wall shows only in part:
+        wall points at some height, neither whole wall nor lintel (a door's jamb, a low
+        cabinet in front of it); at most ``_MAX_HIDDEN_LEAD``; 0 on a line without cells
+        of its own."""
+        if self.occupied is None:
+            return 0
+        partly = self.occupied & ~self.high
+        if self.lintel is not None:
+            partly &= ~self.lintel
+        limit = int(_MAX_HIDDEN_LEAD / self.cell_size)
+        ahead = _cells_ahead(partly, first, outward, limit)
+        return int(np.argmin(ahead)) if not ahead.all() else len(ahead)
 
     def high_run_beyond(self, run: float, outward: int) -> float:
         """How far (m) the line's high evidence goes on from run coordinate ``run`` in

@@ -339,6 +339,29 @@ def test_a_door_at_a_walls_end_is_told_by_its_lintel(lintel):
     assert line.high_wall_beyond(float(line.segments[0, 0]), -1) == 0.0  # nothing seen there
 
 
+@pytest.mark.parametrize(
+    ("lead", "reach"),
+    [("jamb", 1.6), ("nothing seen", 0.0), ("too long", 0.0)],
+)
+def test_a_walls_end_is_carried_to_a_lintel_across_wall_seen_in_part(lead, reach):
+    # Whole wall up to 3.0 m (cells of 0.1 m), then wall seen only in part (a jamb, a low
+    # cabinet) before a lintel over a doorway with space seen behind it.
+    high = np.zeros(80, dtype=bool)
+    high[:30] = True
+    lintel = np.zeros(80, dtype=bool)
+    start = 44 if lead == "too long" else 34  # 1.4 m of partly seen wall: beyond the reach
+    lintel[start : start + 12] = True
+    occupied = high | lintel
+    if lead != "nothing seen":
+        occupied[30:start] = True
+    seen_through = np.zeros(80, dtype=bool)
+    seen_through[30 : start + 12] = True
+    line = dataclasses.replace(
+        _occupied_line(occupied), high=high, lintel=lintel, seen_through=seen_through
+    )
+    assert line.high_wall_beyond(3.0, 1) == pytest.approx(reach)
+
+
 def test_high_evidence_beyond_a_point_is_measured_along_the_line() -> None:
     high = np.zeros(50, dtype=bool)
     high[10:20] = True  # cells of 0.1 m from run 0: high from 1.0 to 2.0 m
