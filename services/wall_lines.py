@@ -470,6 +470,22 @@ def _framed(keys: NDArray[np.int64], n_cells: int, s: float) -> NDArray[np.bool_
     return out
 
 
+def _beside_opening(
+    lintel: NDArray[np.bool_], far_side: NDArray[np.float64], cell: float
+) -> NDArray[np.bool_]:
+    """(C,) cells of a cloud's line within a strip's depth of an opening in it (wall over
+    it, space seen behind it), not in one. Through a door the view widens past its jambs,
+    so the floor seen behind the wall beside a door says nothing of that wall: it was seen
+    through the door. A tall surface standing free in the room has no wall over the space
+    seen past its ends."""
+    opening = lintel & (far_side >= _SUPPORT_POINTS)
+    if not opening.any():
+        return np.zeros(len(lintel), dtype=bool)
+    reach = 2 * round(_FAR_STRIP / cell) + 1
+    near: NDArray[np.bool_] = (maximum_filter1d(opening.astype(np.uint8), reach) > 0) & ~opening
+    return near
+
+
 def _lines_from_peak(
     axis: int,
     offset: float,
@@ -523,6 +539,11 @@ def _lines_from_peak(
     occupied = np.bincount(cells, minlength=n_cells) > 0
     for sign, near_side, far_side in ((1, front, behind), (-1, behind, front)):
         high = tall & (far_side <= _BEHIND_RATIO * np.maximum(near_side, 1.0))
+        if not rule.views and far_side[occupied].sum() < near_side[occupied].sum():
+            # Beside a door the floor seen through it lies behind the wall too, yet along the
+            # wall less is seen behind it than in front (from the next room, the other way).
+            beside = _beside_opening(lintel, far_side, s) & (far_side <= near_side)
+            high |= tall & beside
         spans = _runs(high, _MAX_GAP_CELLS, params.min_wall_cells)
         if not spans or (not rule.views and _faces_away(spans, near_side, far_side, occupied)):
             continue

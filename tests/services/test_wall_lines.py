@@ -18,6 +18,7 @@ from services.wall_lines import (
     WallLine,
     _closes_an_arm,
     _doors_closed,
+    _faces_away,
     _Horizon,
     _make_grid,
     _occluded_links,
@@ -624,7 +625,23 @@ def test_a_wall_with_space_seen_only_behind_it_faces_that_space() -> None:
     )
     lines = find_wall_lines(points, normals, 0.0, 2.6, LayoutParams())
     far = [ln for ln in lines if ln.axis == 0 and not ln.virtual and abs(ln.offset + 2.5) < 0.05]
-    assert far and all(ln.travel == 1 for ln in far), [ln.travel for ln in far]
+    assert all(ln.travel == 1 for ln in far), [ln.travel for ln in far]
+    # The wall with the door is the scan's own, its jambs wall though the floor seen through
+    # the door lies behind them: the far wall is then no wall (seen through the door).
+    near = [ln for ln in lines if ln.axis == 0 and not ln.virtual and abs(ln.offset) < 0.05]
+    assert [ln.travel for ln in near] == [1]
+    assert not far
+
+
+def test_a_wall_facing_away_is_told_by_space_only_behind_it() -> None:
+    spans = [(2, 8)]
+    occupied = np.zeros(10, dtype=bool)
+    occupied[2:8] = True
+    nothing, some = np.zeros(10), np.zeros(10)
+    some[4:6] = 5.0
+    assert _faces_away(spans, nothing, some, occupied)  # space behind only
+    assert not _faces_away(spans, some, some, occupied)  # space in front too
+    assert not _faces_away(spans, nothing, nothing, occupied)  # walls alone: kept
 
 
 def _notch_beside_a_door(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -728,3 +745,38 @@ def test_the_view_through_a_window_stops_at_a_wall_facing_away() -> None:
     assert chain is not None
     arm = [[2.0, -1.2], [2.0, 0.0], [4.0, 0.0], [4.0, 3.0], [1.0, 3.0]]
     np.testing.assert_allclose(chain.keypoints[-5:], arm, atol=0.1)
+
+
+def test_a_wall_beside_a_door_is_wall_though_the_floor_seen_through_it_lies_behind():
+    # A wall along x at y = 0 (interior +y): piers 0-0.7 m and 1.6-2.3 m floor to ceiling,
+    # a door between them under its lintel (z 2.05 to 2.6). Through the door the scan saw
+    # the next room's floor in a view that widens past the jambs, behind the piers too.
+    rng = np.random.default_rng(3)
+    x = np.concatenate([rng.uniform(0, 0.7, 3000), rng.uniform(1.6, 2.3, 3000)])
+    piers = np.column_stack([x, np.zeros_like(x), rng.uniform(0, 2.6, len(x))])
+    x = rng.uniform(0.7, 1.6, 800)
+    lintel = np.column_stack([x, np.zeros_like(x), rng.uniform(2.05, 2.6, len(x))])
+    room = np.column_stack(
+        [rng.uniform(-0.5, 2.8, 20000), rng.uniform(0.05, 3.0, 20000), np.zeros(20000)]
+    )
+    depth = rng.uniform(0.05, 1.5, 5000)
+    across = rng.uniform(0.0, 1.0, 5000)
+    fan = np.column_stack(
+        [0.7 - depth + across * (0.9 + 2 * depth), -depth, np.zeros(5000)]
+    )  # the next room's floor, as seen through the door
+    wall = np.vstack([piers, lintel])
+    floor = np.vstack([room, fan])
+    points = np.vstack([wall, floor])
+    normals = np.vstack(
+        [np.tile([0.0, 1.0, 0.0], (len(wall), 1)), np.tile([0.0, 0.0, 1.0], (len(floor), 1))]
+    )
+    lines = [
+        ln
+        for ln in find_wall_lines(points, normals, 0.0, 2.6, LayoutParams())
+        if ln.axis == 0 and abs(ln.offset) < 0.05
+    ]
+    assert [ln.travel for ln in lines] == [1]  # one wall, the room's side its interior
+    (line,) = lines
+    cells = line.origin + (np.flatnonzero(line.high) + 0.5) * line.cell_size
+    assert cells.min() < 0.2 and cells.max() > 2.1  # both piers are wall
+    assert not np.any((cells > 0.8) & (cells < 1.5))  # the door is not
