@@ -123,7 +123,8 @@ class WallLine:
     def high_wall_beyond(self, run: float, outward: int) -> float:
         """How far (m) the wall runs on, seen only high up (lintel), from a segment end at
         run coordinate ``run`` in direction ``outward`` (+1 or -1), starting within a few
-        cells of the end: the lintel over a doorway (space seen behind the line under it)
+        cells of the end or of up to 1 m of wall seen only in part past it (a jamb, a low
+        cabinet; counted in): the lintel over a doorway (space seen behind the line under it)
         or a wall whose lower part tall furniture hides. 0 when there is none, or it is too
         short (0.3 m for a doorway, 0.6 m for a hidden wall: a corner's clutter) or wider
         than a doorway."""
