@@ -57,8 +57,8 @@ from bench.world_scenes import (
 from schemas.hints import HintsModel
 from schemas.params import PipelineParams
 from services.evaluation import evaluate_result
-from services.pipeline import place_site, root_first, site_hints_of
-from services.placement import evaluate_placement, make_piece
+from services.pipeline import place_site, site_pieces
+from services.placement import evaluate_placement
 from services.placement.energy import FEATURES, feature_weights
 from services.stations import counts_stations, with_station_scored
 from services.synthetic.render import CAMERAS
@@ -106,10 +106,9 @@ def anatomy_of(
     if len(usable) < scene.n_fragments or not _chains_right_in_plan(result, scene.truth):
         return _with(base, "layout")
     layouts = {fid: lay.snapped() for fid, lay in scene.layouts.items()}
-    site_hints = site_hints_of(layouts, usable, hints)
-    usable = root_first(usable, site_hints)
-    pieces = [make_piece(fid, layouts[fid]) for fid in usable]
-    order, rotations = true_assembly(scene.truth, layouts, usable)
+    by_id, site_hints = site_pieces(layouts, usable, hints)
+    pieces = list(by_id.values())
+    order, rotations = true_assembly(scene.truth, layouts, list(by_id))
     truth = evaluate_placement(pieces, order, rotations, params.placement, site_hints)
     if truth is None:
         return _with(base, "not a loop")

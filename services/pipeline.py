@@ -75,8 +75,7 @@ __all__ = [
     "estimate_layout",
     "fragment_pose",
     "place_site",
-    "root_first",
-    "site_hints_of",
+    "site_pieces",
 ]
 
 
@@ -129,10 +128,22 @@ class _Placed:
     rectilinear: bool = True
 
 
-def site_hints_of(
+def site_pieces(
+    layouts: Mapping[str, LocalLayout], usable: Sequence[str], hints: HintsModel | None
+) -> tuple[dict[str, Piece], SiteHints]:
+    """The pieces of fragments ``usable`` as the search takes them, the fixed first one
+    first (:func:`_root_first`), and the hints resolved to them. ``layouts`` snapped
+    (:meth:`LocalLayout.snapped`), as :func:`place_site` places them."""
+    site_hints = _site_hints(layouts, usable, hints)
+    # The search starts from the smallest id, not the first upload: the same fragments give
+    # the same answer (and site frame) whatever order they arrived in.
+    first = _root_first(sorted(usable), site_hints)
+    return {fid: make_piece(fid, layouts[fid]) for fid in first}, site_hints
+
+
+def _site_hints(
     layouts: Mapping[str, LocalLayout], usable: Sequence[str], hints: HintsModel | None
 ) -> SiteHints:
-    """The hints of fragments ``usable`` resolved to their pieces (priors on their chains)."""
     if hints is None:
         return SiteHints()
     priors = {
@@ -143,7 +154,7 @@ def site_hints_of(
     return SiteHints(priors, hint_pairs(hints.neighbours, hints.order))
 
 
-def root_first(usable: list[str], hints: SiteHints) -> list[str]:
+def _root_first(usable: list[str], hints: SiteHints) -> list[str]:
     """The fixed first piece: with priors, the most certain one (the site frame then
     follows the hints' frame most closely); else the first fragment."""
     if not hints.priors:
@@ -624,11 +635,8 @@ def place_site(
         for fid, lay in layouts.items()
     }
     usable = [fid for fid, lay in layouts.items() if lay.ok]
-    site_hints = site_hints_of(layouts, usable, hints)
+    pieces, site_hints = site_pieces(layouts, usable, hints)
     report("placement", 0.1)
-    # The search starts from the smallest id, not the first upload: the same fragments give
-    # the same answer (and site frame) whatever order they arrived in.
-    pieces = {fid: make_piece(fid, layouts[fid]) for fid in root_first(sorted(usable), site_hints)}
     placement = place_pieces(list(pieces.values()), params.placement, site_hints)
     if placement is not None:
         placement = with_station_cost(
