@@ -24,7 +24,14 @@ from schemas.params import PlacementParams
 from services.placement.pieces import UNIT, Piece
 from services.types import FloatArray
 
-__all__ = ["EndMatch", "EndVoxels", "boundary_mismatch", "end_voxels", "register_ends"]
+__all__ = [
+    "EndMatch",
+    "EndVoxels",
+    "boundary_cost",
+    "boundary_mismatch",
+    "end_voxels",
+    "register_ends",
+]
 
 _PLANE_CLEARANCE = 0.06  # m, points this close to a wall, the floor or the ceiling are planes
 _MAX_DEPTH = 2.5  # m, structure further into the room is not compared
@@ -41,11 +48,23 @@ _MIN_CELLS = 4  # fewer structure voxels than this on both sides: no evidence
 # is a measurement: on the benchmark's true straight junctions (test split) 90 % of those
 # are within 0.15 m of the true displacement (median error 3 cm).
 _MEASURED_AGREEMENT = 0.2
-# Agreement is evidence for a junction from _CHANCE_AGREEMENT (below it false pairs are 12
-# times as many as true ones on the tune split; above 0.3 true ones outnumber them) and
-# counts fully from _CHANCE_AGREEMENT + _AGREEMENT_SPAN (likelihood ratio about 30).
-_CHANCE_AGREEMENT = 0.15
-_AGREEMENT_SPAN = 0.3
+# Agreement is corrected for chance: what two ends' voxels would share if they lay at random
+# in the voxels both scans reached (na * nb / cells coincide) is taken off before sharing by
+# the mean count. Raw agreement is no evidence in itself: on the tune split, ends with 300 or
+# more structure voxels (furniture along the wall at table height) agree by 0.15-0.3 at some
+# shift as often for false pairs as for true ones (log likelihood ratio -1.1 to -0.1), while
+# ends of 30-100 voxels agreeing as much are true ones 2-4 times as often. The corrected
+# agreement is evidence from _CHANCE_EXCESS (below it the likelihood ratio is flat) and
+# counts fully from _CHANCE_EXCESS + _EXCESS_SPAN (log likelihood ratio about 4 above the
+# flat part, 3.3 at the span's end).
+_CHANCE_EXCESS = 0.12
+_EXCESS_SPAN = 0.33
+# The paper's boundary mismatch as evidence: below _BOUNDARY_MATCHED the likelihood ratio of
+# true to false pairs is about 10 (tune split), and it falls steadily to
+# _BOUNDARY_MATCHED + _BOUNDARY_SPAN, above which it is flat (about 0.6): a mismatch beyond
+# that is what most true junctions show too (their sections cut through different clutter).
+_BOUNDARY_MATCHED = 0.2
+_BOUNDARY_SPAN = 0.25
 
 
 @dataclass(frozen=True)
@@ -98,9 +117,10 @@ def end_voxels(piece: Piece, end: str) -> EndVoxels:
 class EndMatch:
     """Two chain ends registered along the wall.
 
-    score: in [-1, 0], the energy's term: -1 when much of both ends' structure coincides at
-    the best shift, 0 when little or none does (structure without a counterpart is hardly
-    evidence against a junction: occlusion, clutter that moved, a gap between the scans).
+    score: in [-1, 0], the energy's term: -1 when much more of both ends' structure
+    coincides at the best shift than chance would make coincide, 0 when no more does
+    (structure without a counterpart is hardly evidence against a junction: occlusion,
+    clutter that moved, a gap between the scans).
     shift: where b's source lies past a's target along the wall at the best exact fit, m
     (negative: the scans overlap). agreement: the share of both ends' voxels that coincide
     exactly at that shift. bounded: the best shift lies inside the range tried, not at its
@@ -125,10 +145,11 @@ def register_ends(a: EndVoxels, b: EndVoxels) -> EndMatch:
 
     For every shift of b along the wall (its source from 0.6 m before a's target, an
     overlap, to 0.4 m past it, a gap) the two are compared where both scans reach: the
-    agreement is the share of both sides' voxels that coincide exactly (the Dice overlap).
-    The best shift is the measurement; its agreement the evidence. Exact voxels, not grown
-    ones: furniture against a wall at table or cabinet height is in most ends, and a
-    tolerant comparison finds it in most false pairs too (on the tune split, the exact
+    agreement is the share of both sides' voxels that coincide exactly (the Dice overlap),
+    less what coincides by chance (see _CHANCE_EXCESS). The best shift is the measurement;
+    its corrected agreement the evidence. Exact voxels, not grown ones: furniture against a
+    wall at table or cabinet height is in most ends, and a tolerant comparison finds it in
+    most false pairs too (on the tune split, the exact
     agreement ranks the true neighbour above the false ones sharing an end 71-82 % of the
     time, a one-voxel tolerance 61-75 %).
 
@@ -136,7 +157,7 @@ def register_ends(a: EndVoxels, b: EndVoxels) -> EndMatch:
     >>> register_ends(empty, empty)
     EndMatch(score=0.0, shift=0.0, agreement=0.0, bounded=True)
     """
-    agreement, best = 0.0, 0
+    excess, agreement, best = 0.0, 0.0, 0
     for step in range(-_SHIFT_BEFORE, _SHIFT_AFTER + 1):
         # b's column c lies at a's column c + step.
         lo, hi = max(0, step), min(_X_CELLS, _X_CELLS + step)
@@ -148,10 +169,11 @@ def register_ends(a: EndVoxels, b: EndVoxels) -> EndMatch:
         na, nb = int(np.count_nonzero(pa)), int(np.count_nonzero(pb))
         if max(na, nb) < _MIN_CELLS:
             continue
-        share = 2.0 * int(np.count_nonzero(pa & pb)) / (na + nb)
-        if share > agreement:
-            agreement, best = share, step
-    evidence = float(np.clip((agreement - _CHANCE_AGREEMENT) / _AGREEMENT_SPAN, 0.0, 1.0))
+        common = int(np.count_nonzero(pa & pb))
+        corrected = (common - na * nb / pa.size) / (0.5 * (na + nb))
+        if corrected > excess:
+            excess, agreement, best = corrected, 2.0 * common / (na + nb), step
+    evidence = float(np.clip((excess - _CHANCE_EXCESS) / _EXCESS_SPAN, 0.0, 1.0))
     score = 0.0 - evidence  # not -evidence: no score of -0.0 without evidence
     bounded = -_SHIFT_BEFORE < best < _SHIFT_AFTER
     return EndMatch(score, float(best * _VOXEL), float(agreement), bounded)
@@ -196,6 +218,16 @@ def boundary_mismatch(a: Piece, b: Piece, params: PlacementParams) -> float:
     d_ba, _ = cKDTree(pa[:, 1:]).query(pb[:, 1:])
     scores = erf(np.concatenate([d_ab, d_ba]) / (params.boundary_sigma * np.sqrt(2.0)))
     return float(scores.mean())
+
+
+def boundary_cost(mismatch: float) -> float:
+    """The energy's boundary term of a junction: its mismatch as evidence, 0 up to a close
+    match, 1 from a mismatch most true junctions show too (see _BOUNDARY_MATCHED).
+
+    >>> boundary_cost(0.1), boundary_cost(0.325), boundary_cost(0.9)
+    (0.0, 0.5, 1.0)
+    """
+    return float(np.clip((mismatch - _BOUNDARY_MATCHED) / _BOUNDARY_SPAN, 0.0, 1.0))
 
 
 def _common_window(a: FloatArray, b: FloatArray, margin: float) -> tuple[FloatArray, FloatArray]:

@@ -12,6 +12,7 @@ from services.placement import Piece
 from services.placement.evidence import (
     EndMatch,
     EndVoxels,
+    boundary_cost,
     boundary_mismatch,
     end_voxels,
     register_ends,
@@ -155,6 +156,27 @@ def test_the_same_furniture_a_voxel_off_is_little_evidence():
     assert register_ends(a, b).score > -0.5
 
 
+def test_clutter_that_agrees_only_as_often_as_chance_is_no_evidence():
+    # Two ends dense with unrelated clutter (a third of every voxel both scans reached):
+    # at some shift they share about a third of their voxels, as any two such ends would.
+    rng = np.random.default_rng(16)
+    a = EndVoxels(rng.random((20, 28, 32)) < 0.33, np.ones(20, dtype=bool))
+    b = EndVoxels(rng.random((20, 28, 32)) < 0.33, np.ones(20, dtype=bool))
+    match = register_ends(a, b)
+    assert match.agreement > 0.3
+    assert match.score == 0.0
+
+
+def test_the_same_clutter_registers_though_clutter_is_everywhere():
+    rng = np.random.default_rng(17)
+    clutter = rng.random((30, 28, 32)) < 0.33
+    a = EndVoxels(clutter[:20], np.ones(20, dtype=bool))
+    b = EndVoxels(clutter[3:23], np.ones(20, dtype=bool))  # b's column c is a's c + 3
+    match = register_ends(a, b)
+    assert match.score == -1.0
+    assert match.shift == pytest.approx(0.3)
+
+
 def test_no_structure_gives_no_evidence():
     rng = np.random.default_rng(13)
     a = end_voxels(_a_end(rng, boxes=[]), "target")
@@ -254,3 +276,9 @@ def test_boundary_mismatch_without_enough_points_in_the_band_is_neutral():
     # Points outside the band do not count, however many.
     away = _profile(rng, x=(0.3, 1.0))
     assert boundary_mismatch(*_pair(away, _profile(rng)), params) == 0.5
+
+
+def test_boundary_cost_stops_rising_where_true_junctions_mismatch_as_much():
+    assert boundary_cost(0.05) == 0.0
+    assert 0.0 < boundary_cost(0.3) < boundary_cost(0.4) < 1.0
+    assert boundary_cost(0.6) == boundary_cost(0.95) == 1.0
