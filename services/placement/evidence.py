@@ -24,14 +24,7 @@ from schemas.params import PlacementParams
 from services.placement.pieces import UNIT, Piece
 from services.types import FloatArray
 
-__all__ = [
-    "EndMatch",
-    "EndVoxels",
-    "boundary_cost",
-    "boundary_mismatch",
-    "end_voxels",
-    "register_ends",
-]
+__all__ = ["EndMatch", "EndVoxels", "boundary_mismatch", "end_voxels", "register_ends"]
 
 _PLANE_CLEARANCE = 0.06  # m, points this close to a wall, the floor or the ceiling are planes
 _MAX_DEPTH = 2.5  # m, structure further into the room is not compared
@@ -59,12 +52,6 @@ _MEASURED_AGREEMENT = 0.2
 # flat part, 3.3 at the span's end).
 _CHANCE_EXCESS = 0.12
 _EXCESS_SPAN = 0.33
-# The paper's boundary mismatch as evidence: below _BOUNDARY_MATCHED the likelihood ratio of
-# true to false pairs is about 10 (tune split), and it falls steadily to
-# _BOUNDARY_MATCHED + _BOUNDARY_SPAN, above which it is flat (about 0.6): a mismatch beyond
-# that is what most true junctions show too (their sections cut through different clutter).
-_BOUNDARY_MATCHED = 0.2
-_BOUNDARY_SPAN = 0.25
 
 
 @dataclass(frozen=True)
@@ -218,16 +205,6 @@ def boundary_mismatch(a: Piece, b: Piece, params: PlacementParams) -> float:
     d_ba, _ = cKDTree(pa[:, 1:]).query(pb[:, 1:])
     scores = erf(np.concatenate([d_ab, d_ba]) / (params.boundary_sigma * np.sqrt(2.0)))
     return float(scores.mean())
-
-
-def boundary_cost(mismatch: float) -> float:
-    """The energy's boundary term of a junction: its mismatch as evidence, 0 up to a close
-    match, 1 from a mismatch most true junctions show too (see _BOUNDARY_MATCHED).
-
-    >>> boundary_cost(0.1), boundary_cost(0.325), boundary_cost(0.9)
-    (0.0, 0.5, 1.0)
-    """
-    return float(np.clip((mismatch - _BOUNDARY_MATCHED) / _BOUNDARY_SPAN, 0.0, 1.0))
 
 
 def _common_window(a: FloatArray, b: FloatArray, margin: float) -> tuple[FloatArray, FloatArray]:

@@ -12,7 +12,6 @@ from services.placement import Piece
 from services.placement.evidence import (
     EndMatch,
     EndVoxels,
-    boundary_cost,
     boundary_mismatch,
     end_voxels,
     register_ends,
@@ -276,9 +275,3 @@ def test_boundary_mismatch_without_enough_points_in_the_band_is_neutral():
     # Points outside the band do not count, however many.
     away = _profile(rng, x=(0.3, 1.0))
     assert boundary_mismatch(*_pair(away, _profile(rng)), params) == 0.5
-
-
-def test_boundary_cost_stops_rising_where_true_junctions_mismatch_as_much():
-    assert boundary_cost(0.05) == 0.0
-    assert 0.0 < boundary_cost(0.3) < boundary_cost(0.4) < 1.0
-    assert boundary_cost(0.6) == boundary_cost(0.95) == 1.0
