@@ -48,8 +48,8 @@ _MEASURED_AGREEMENT = 0.2
 # shift as often for false pairs as for true ones (log likelihood ratio -1.1 to -0.1), while
 # ends of 30-100 voxels agreeing as much are true ones 2-4 times as often. The corrected
 # agreement is evidence from _CHANCE_EXCESS (below it the likelihood ratio is flat) and
-# counts fully from _CHANCE_EXCESS + _EXCESS_SPAN (log likelihood ratio about 4 above the
-# flat part, 3.3 at the span's end).
+# counts fully from _CHANCE_EXCESS + _EXCESS_SPAN (above it the log likelihood ratio is
+# +3.3, about 3.8 over the flat part's).
 _CHANCE_EXCESS = 0.12
 _EXCESS_SPAN = 0.33
 
@@ -136,9 +136,9 @@ def register_ends(a: EndVoxels, b: EndVoxels) -> EndMatch:
     less what coincides by chance (see _CHANCE_EXCESS). The best shift is the measurement;
     its corrected agreement the evidence. Exact voxels, not grown ones: furniture against a
     wall at table or cabinet height is in most ends, and a tolerant comparison finds it in
-    most false pairs too (on the tune split, the exact
-    agreement ranks the true neighbour above the false ones sharing an end 71-82 % of the
-    time, a one-voxel tolerance 61-75 %).
+    most false pairs too (on the tune split, the exact agreement ranks the true neighbour
+    above the false ones sharing an end 71-82 % of the time, a one-voxel tolerance
+    61-75 %).
 
     >>> empty = EndVoxels(np.zeros((20, 28, 32), dtype=bool), np.ones(20, bool))
     >>> register_ends(empty, empty)
