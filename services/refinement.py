@@ -7,8 +7,10 @@ placement's (:func:`services.placement.energy.junction_displacement`): a straigh
 hides an overlap or gap along its wall, a turning one some unseen wall either side of its
 corner, and both carry keypoint noise. Where the two ends' structure registers sharply
 (``EndMatch.measured_shift``), the overlap along the wall is measured, not guessed: this is
-what fixes a room's length when all its cuts are mid-wall. A measurement the solution
-disagrees with by far is dropped and the problem solved again. Prior poses from the fleet
+what fixes a room's length when all its cuts are mid-wall. Unmeasured, a straight junction
+is taken to hide the overlap neighbouring scans usually have (``refined_junction_mean``;
+the energy's closure term keeps ``junction_mean``). A measurement the solution disagrees
+with by far is dropped and the problem solved again. Prior poses from the fleet
 (``Anchor``) add a row per hinted piece against its prior position, in a frame of their own
 that may shift freely (one prior alone says where the room is, not how it is shaped); a
 prior the solution misses by more than three of its standard deviations is dropped the same
@@ -126,6 +128,12 @@ class _Problem:
     lo: FloatArray
     hi: FloatArray
     ordering: NDArray[np.bool_]
+
+
+def _refinement_noise(params: PlacementParams) -> JunctionNoise:
+    """The placement's junction model with the overlap the refinement expects at a straight
+    junction (``refined_junction_mean``) in place of the energy's."""
+    return replace(JunctionNoise.from_params(params), straight_mean=params.refined_junction_mean)
 
 
 def _junction_rows(
@@ -313,7 +321,7 @@ def refine_translations(
         p.keypoints @ rot90(r).T + t
         for p, r, t in zip(pieces, rotations, translations, strict=True)
     ]
-    noise = JunctionNoise.from_params(params)
+    noise = _refinement_noise(params)
     shifts = measured_shifts(pieces, rotations, measured)
     refined = _refine(sites, pieces, rotations, translations, noise, shifts, anchors)
     moves = refined.translations - translations
@@ -471,7 +479,7 @@ def _covariance(
     sigmas = prior_sigmas or {}
     # Only the rows' weights matter here, not where the priors are.
     anchors = [Anchor(np.zeros(2), sigmas[p.id]) if p.id in sigmas else None for p in pieces]
-    noise = JunctionNoise.from_params(params)
+    noise = _refinement_noise(params)
     problem = _junction_rows(sites, pieces, rotations, noise, shifts, anchors)
     free = problem.J[:, 2:]
     dim = 2 * len(pieces) - 2

@@ -41,10 +41,12 @@ __all__ = [
     "small_scene",
 ]
 
-# The placement energy before fitting: unit weights, and the plain Boltzmann share (with a
-# fixed 'none of these' energy) as the confidence. Tests that check energies, ties and
-# shares by hand use these, so that refitting the defaults does not move them.
+# The placement energy before fitting: unit weights, the plain Boltzmann share (with a
+# fixed 'none of these' energy) as the confidence, and a refinement whose junctions hide
+# no overlap on average. Tests that check energies, ties, shares and positions by hand use
+# these, so that refitting the defaults does not move them.
 UNTUNED = PlacementParams(
+    refined_junction_mean=0.0,
     weight_turn=1.0,
     weight_hull=1.0,
     weight_closure=1.0,

@@ -17,7 +17,7 @@ from services.refinement import (
     stray_anchors,
     translation_spread,
 )
-from tests.conftest import bare_piece, chains_from_polygon, overlapping_halves
+from tests.conftest import UNTUNED, bare_piece, chains_from_polygon, overlapping_halves
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -47,7 +47,9 @@ def test_parallel_junctions_become_collinear(l_room):
         d_in, d_out = sites[i][-1] - sites[i][-2], sites[(i + 1) % len(sites)][1] - p
         if abs(d_in @ d_out) > 0:  # parallel junction: same wall line
             axis = 1 if abs(d_in[0]) > abs(d_in[1]) else 0
-            assert q[axis] == pytest.approx(p[axis], abs=1e-3)
+            # The line is a weighted term: the junctions' model along the walls leaves
+            # millimetres (the disturbance was 4-10 cm).
+            assert q[axis] == pytest.approx(p[axis], abs=5e-3)
     assert np.allclose(refined.translations[0], placement.translations[0])
 
 
@@ -75,17 +77,36 @@ def test_unsolvable_input_falls_back_to_the_placement():
 @pytest.mark.parametrize(("with_structure", "overlap"), [(True, -0.4), (False, -0.2)])
 def test_an_overlap_the_structure_measures_takes_the_loop_gap(with_structure, overlap):
     # The loop's 0.4 m gap must go somewhere. Unmeasured, the two straight junctions share
-    # it (the room comes out 0.2 m long); measured, the bottom junction takes all of it.
+    # it (the room comes out 0.2 m long, junctions hiding no overlap on average); measured,
+    # the bottom junction takes all of it.
     pieces = overlapping_halves(with_structure)
-    cand = evaluate_placement(pieces, ["p0", "p1"], [0, 0])
+    cand = evaluate_placement(pieces, ["p0", "p1"], [0, 0], UNTUNED)
     assert cand is not None
     shifts = measured_shifts(pieces, [0, 0])
     assert shifts[0] is None  # the top cut: nothing to register
     assert (shifts[1] is not None) == with_structure
-    refined = refine_translations(pieces, [0, 0], translations_of(pieces, cand))
+    refined = refine_translations(pieces, [0, 0], translations_of(pieces, cand), UNTUNED)
     sites = _sites(pieces, [0, 0], refined.translations)
     bottom = sites[0][0][0] - sites[1][-1][0]  # p0's source past p1's target, along +x
     assert bottom == pytest.approx(overlap, abs=0.05)
+
+
+def test_an_unmeasured_overlap_is_guessed_from_the_overlaps_scans_usually_have():
+    # The halves overlap 0.4 m at the bottom cut; the top cut is a hidden corner. Expecting
+    # no overlap, the refinement splits the loop's gap between the two; expecting the
+    # overlap measured on the benchmarks (-0.2 m on average), the bottom takes more of it.
+    pieces = overlapping_halves(False)
+    cand = evaluate_placement(pieces, ["p0", "p1"], [0, 0])
+    assert cand is not None
+    start = translations_of(pieces, cand)
+
+    def bottom(params: PlacementParams) -> float:
+        refined = refine_translations(pieces, [0, 0], start, params)
+        sites = _sites(pieces, [0, 0], refined.translations)
+        return float(sites[0][0][0] - sites[1][-1][0])
+
+    assert PlacementParams().refined_junction_mean < 0.0
+    assert abs(bottom(PlacementParams()) + 0.4) < abs(bottom(UNTUNED) + 0.4) - 0.05
 
 
 def test_the_placements_measurements_are_the_ones_the_refinement_takes():
@@ -144,20 +165,21 @@ def test_priors_pin_pieces_the_junctions_leave_free_and_a_lone_prior_pins_nothin
 
 def test_prior_positions_fix_what_the_junctions_leave_to_the_model():
     # The halves overlap 0.4 m at the bottom cut, which nothing measures: without priors the
-    # second half sits where the overlap model guesses. Priors of 2 cm at the true sources
-    # (in a frame shifted by (10, -5): only their relative positions count) put it there.
+    # second half sits where the overlap model (no overlap on average) guesses. Priors of
+    # 2 cm at the true sources (in a frame shifted by (10, -5): only their relative
+    # positions count) put it there.
     pieces = overlapping_halves(False)
     start = np.array([[3.0, 0.0], [0.3, 4.0]])
-    guessed = refine_translations(pieces, [0, 0], start)
+    guessed = refine_translations(pieces, [0, 0], start, UNTUNED)
     truth = np.array([[3.0, 0.0], [0.0, 4.0]])  # the sources: mid-bottom, top-left corner
     anchors = [Anchor(t + np.array([10.0, -5.0]), 0.02) for t in truth]
-    anchored = refine_translations(pieces, [0, 0], start, anchors=anchors)
+    anchored = refine_translations(pieces, [0, 0], start, UNTUNED, anchors=anchors)
     assert anchored.status == "solved"
     relative = anchored.translations[1] - anchored.translations[0]
     assert relative == pytest.approx(truth[1] - truth[0], abs=0.03)
     assert abs((guessed.translations[1] - guessed.translations[0] - relative)[0]) > 0.1
     # One prior alone pins nothing: the same as none.
-    lone = refine_translations(pieces, [0, 0], start, anchors=[None, anchors[1]])
+    lone = refine_translations(pieces, [0, 0], start, UNTUNED, anchors=[None, anchors[1]])
     assert np.allclose(lone.translations, guessed.translations, atol=1e-6)
 
 
