@@ -17,7 +17,7 @@ from bench.failure_anatomy import (
     term_table,
 )
 from bench.world_scenes import CachedScene
-from schemas.params import PipelineParams
+from schemas.params import PipelineParams, PlacementParams
 from services.synthetic import ground_truth_json
 from tests.conftest import scene_layouts, small_scene
 
@@ -109,10 +109,14 @@ def test_frame_rooms_are_one_set_bucketed_by_frames(capsys: pytest.CaptureFixtur
 
 
 def test_the_true_assembly_at_the_wrong_size_is_geometry_not_energy() -> None:
-    # Kinect room 2009: the main room is the true loop, 10 % of the diagonal off in size;
-    # the truth's energy evaluated again differs from the result's by float noise (2e-6).
+    # Kinect room 2009, refined expecting no overlap at the junctions (as before
+    # refined_junction_mean; the default now gets its size right): the main room is the
+    # true loop, 10 % of the diagonal off in size; the truth's energy evaluated again
+    # differs from the result's by float noise (2e-6).
     scene = frame_scenes("kinect", 1, 2009, False, PipelineParams())[0]
-    anatomy = anatomy_of(scene, PipelineParams())
+    end_to_end = PipelineParams(placement=PlacementParams(refined_junction_mean=0.0))
+    assert anatomy_of(scene, PipelineParams()).right
+    anatomy = anatomy_of(scene, end_to_end)
     assert not anatomy.right
     assert anatomy.cause == "geometry"
     assert anatomy.gap is not None and abs(anatomy.gap) < 1e-4
