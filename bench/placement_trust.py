@@ -6,7 +6,8 @@ fitting), it reports per bucket: ACC_global (paper), how many results said "clos
 the share of those that are right, "ambiguous" and "open" counts, whether the truth is in
 the top 3 (main result or its first two alternatives), ACC_local, pose and layout errors,
 and the time of placement + refinement. Then: a reliability table (confidence bins vs share
-right), how well each junction cue separates true from false neighbours (AUC), the
+right), how well each junction cue separates true from false neighbours (AUC, and the
+structure evidence's likelihood ratio per bin), the
 ablation of each energy term per bucket, and the gain from hints (prior poses of 1.5 m and
 20 degrees drawn around the truth: alone, and with the layouts).
 
@@ -57,7 +58,15 @@ from services.placement import make_piece
 from services.placement.evidence import boundary_mismatch, end_voxels, register_ends
 from services.placement.pieces import SAMPLE_SPACING, Piece
 
-__all__ = ["Outcome", "main", "overlap_table"]
+__all__ = [
+    "STRUCTURE_CUE",
+    "Outcome",
+    "cue_scores",
+    "cue_table",
+    "evidence_table",
+    "main",
+    "overlap_table",
+]
 
 ABLATIONS = {
     "full": {},
@@ -206,13 +215,21 @@ def _bin_label(lo: float, hi: float) -> str:
     return f"[{lo:.2f}, {min(hi, 1.0):.2f}{']' if hi > 1 else ')'}"
 
 
+def _table(title: str, headers: Sequence[str], left: int = 0) -> Table:
+    """A table of the benchmark's style: its first ``left`` columns left-aligned, the
+    others (numbers) right-aligned."""
+    table = Table(title=title, title_justify="left", box=box.SIMPLE)
+    for k, header in enumerate(headers):
+        table.add_column(header, justify="left" if k < left else "right")
+    return table
+
+
 def reliability_table(outcomes: Sequence[Outcome]) -> Table:
     """Confidence bins against the share of right main results (calibration)."""
-    table = Table(
-        title="Reliability: confidence vs share right", title_justify="left", box=box.SIMPLE
+    table = _table(
+        "Reliability: confidence vs share right",
+        ("confidence", "results", "mean confidence", "right %", "said closed"),
     )
-    for header in ("confidence", "results", "mean confidence", "right %", "said closed"):
-        table.add_column(header, justify="right")
     confidence = np.array([o.confidence for o in outcomes])
     right = np.array([o.correct for o in outcomes])
     for lo, hi in itertools.pairwise(CONFIDENCE_BINS):
@@ -234,13 +251,10 @@ def reliability_table(outcomes: Sequence[Outcome]) -> Table:
 
 def fragment_reliability_table(outcomes: Sequence[Outcome]) -> Table:
     """Each fragment's own confidence against the share of fragments placed right."""
-    table = Table(
-        title="Per-fragment reliability: a fragment's confidence vs its pose right",
-        title_justify="left",
-        box=box.SIMPLE,
+    table = _table(
+        "Per-fragment reliability: a fragment's confidence vs its pose right",
+        ("confidence", "fragments", "in ambiguous results", "right %"),
     )
-    for header in ("confidence", "fragments", "in ambiguous results", "right %"):
-        table.add_column(header, justify="right")
     checks = [(c, r, o.status) for o in outcomes for c, r in o.fragments]
     confidence = np.array([c for c, _, _ in checks])
     right = np.array([r for _, r, _ in checks])
@@ -282,12 +296,18 @@ def _conflict(a: Piece, b: Piece) -> float:
     return hits * SAMPLE_SPACING
 
 
-def cue_table(scenes: Iterable[CachedScene], params: PlacementParams) -> Table:
-    """AUC of each junction cue for telling true neighbours (b follows a) from false ones.
+STRUCTURE_CUE = "structure (end regions registered)"
+CueScores = dict[str, tuple[list[float], list[float]]]  # cue: (true pairs', false pairs')
+# Bins of the structure evidence (the energy's structure score, negated): none, then up to
+# full. The first holds exactly 0 (no agreement beyond chance).
+_EVIDENCE_BINS = ((0.0, 0.0), (0.0, 0.3), (0.3, 0.6), (0.6, 0.9), (0.9, 1.0))
 
-    Scores are oriented so that higher means "more likely neighbours"."""
-    cues: dict[str, tuple[list[float], list[float]]] = {
-        "structure (end regions registered)": ([], []),
+
+def cue_scores(scenes: Iterable[CachedScene], params: PlacementParams) -> CueScores:
+    """Each junction cue's score of every ordered pair of pieces (b follows a), split into
+    true neighbours and false ones; higher means "more likely neighbours"."""
+    cues: CueScores = {
+        STRUCTURE_CUE: ([], []),
         "boundary mismatch (paper E_b)": ([], []),
         "free-space conflict": ([], []),
     }
@@ -310,15 +330,48 @@ def cue_table(scenes: Iterable[CachedScene], params: PlacementParams) -> Table:
                 )
                 for values, score in zip(cues.values(), scores, strict=True):
                     values[side].append(score)
-    table = Table(
-        title="Junction cues: true vs false neighbours", title_justify="left", box=box.SIMPLE
+    return cues
+
+
+def cue_table(scores: CueScores) -> Table:
+    """AUC of each junction cue (:func:`cue_scores`) for telling true neighbours from false
+    ones."""
+    table = _table(
+        "Junction cues: true vs false neighbours", ("cue", "AUC", "true pairs", "false pairs"), 1
     )
-    for header in ("cue", "AUC", "true pairs", "false pairs"):
-        table.add_column(header, justify="left" if header == "cue" else "right")
-    for name, (positive, negative) in cues.items():
+    for name, (positive, negative) in scores.items():
         table.add_row(
             name, f"{_auc(positive, negative):.3f}", str(len(positive)), str(len(negative))
         )
+    return table
+
+
+def evidence_table(positive: Sequence[float], negative: Sequence[float]) -> Table:
+    """The structure evidence's log likelihood ratio per bin: the log of the share of true
+    pairs in the bin over the share of false pairs. What the energy's structure term should
+    follow, bin by bin, on any set of scenes (an AUC hides where a cue errs).
+
+    >>> table = evidence_table([0.0, 1.0, 1.0, 1.0], [0.0, 0.0, 0.0, 1.0])
+    >>> list(table.columns[3].cells)[0], list(table.columns[3].cells)[-1]
+    ('-1.10', '+1.10')
+    """
+    true, false = np.asarray(positive, dtype=np.float64), np.asarray(negative, dtype=np.float64)
+    table = _table(
+        "Structure evidence per bin",
+        ("evidence", "true pairs", "false pairs", "log LR"),
+    )
+    for lo, hi in _EVIDENCE_BINS:
+        if hi == lo:
+            label = f"{lo:.1f}"
+            n_true, n_false = int(np.sum(true == lo)), int(np.sum(false == lo))
+        else:
+            label = f"({lo:.1f}, {hi:.1f}]"
+            n_true = int(np.sum((true > lo) & (true <= hi)))
+            n_false = int(np.sum((false > lo) & (false <= hi)))
+        ratio = "-"
+        if n_true and n_false:
+            ratio = f"{math.log((n_true / len(true)) / (n_false / len(false))):+.2f}"
+        table.add_row(label, str(n_true), str(n_false), ratio)
     return table
 
 
@@ -358,13 +411,11 @@ def overlap_table(scenes: Iterable[CachedScene]) -> Table:
             else:
                 false_pairs += 1
                 false_measured += match.measured_shift is not None
-    table = Table(
-        title="Overlaps measured by the end regions' structure",
-        title_justify="left",
-        box=box.SIMPLE,
+    table = _table(
+        "Overlaps measured by the end regions' structure",
+        ("pairs", "count", "measured %", "error median m", "within 0.15 m %"),
+        1,
     )
-    for header in ("pairs", "count", "measured %", "error median m", "within 0.15 m %"):
-        table.add_column(header, justify="left" if header == "pairs" else "right")
     err = np.asarray(errors)
     table.add_row(
         "true straight junctions",
@@ -545,7 +596,9 @@ def main(argv: list[str] | None = None) -> int:
     console.print(reliability_table(outcomes))
     console.print(fragment_reliability_table(outcomes))
     if args.cues_scenes:
-        console.print(cue_table(scenes[: args.cues_scenes], PlacementParams()))
+        scores = cue_scores(scenes[: args.cues_scenes], PlacementParams())
+        console.print(cue_table(scores))
+        console.print(evidence_table(*scores[STRUCTURE_CUE]))
         console.print(overlap_table(scenes[: args.cues_scenes]))
     if args.ablation_per_bucket:
         console.print(ablation_table(_subset(scenes, args.ablation_per_bucket)))

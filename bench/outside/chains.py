@@ -13,7 +13,9 @@ Each fragment is laid out on its own and its truth is put in the project's groun
   (:func:`shape_error_in_plan`: a chain that cuts across a bay or drops a notch between
   right ends); ``--list`` prints each wrong chain (``--by ends`` or ``--by shape``);
 * ``--cues`` prints :func:`bench.placement_trust.cue_table`: how well each junction cue
-  tells true neighbours from false ones here (AUC);
+  tells true neighbours from false ones here (AUC), and
+  :func:`bench.placement_trust.evidence_table`: the structure evidence's likelihood ratio
+  per bin;
 * ``--anatomy`` places every room (:func:`services.pipeline.place_site`, the CLI's
   placement without its refinement of the result files) and prints
   :mod:`bench.failure_anatomy`'s tables: per bucket, why the wrong rooms are wrong.
@@ -41,7 +43,7 @@ from rich.console import Console
 from bench.failure_anatomy import anatomy_of, cause_table, term_table
 from bench.outside.clouds import generate, perimeter_cum
 from bench.outside.run import Job, cloud_jobs
-from bench.placement_trust import cue_table
+from bench.placement_trust import STRUCTURE_CUE, cue_scores, cue_table, evidence_table
 from bench.room_shapes import DEFAULT_PATH
 from bench.scoring import chain_error_in_plan
 from bench.world_scenes import CachedScene
@@ -275,7 +277,9 @@ def main(argv: list[str] | None = None) -> int:
                 console.print(line, highlight=False)
     console.print(chain_table(scenes), highlight=False)
     if args.cues:
-        console.print(cue_table(scenes, PipelineParams().placement))
+        scores = cue_scores(scenes, PipelineParams().placement)
+        console.print(cue_table(scores))
+        console.print(evidence_table(*scores[STRUCTURE_CUE]))
     if args.anatomy:
         params = PipelineParams()
         with multiprocessing.get_context("fork").Pool(args.workers) as pool:

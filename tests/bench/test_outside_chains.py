@@ -19,7 +19,7 @@ from bench.outside.chains import (
     wrong_chains,
 )
 from bench.outside.run import Job
-from bench.placement_trust import cue_table
+from bench.placement_trust import STRUCTURE_CUE, cue_scores, cue_table, evidence_table
 from bench.world_scenes import CachedScene
 from schemas.params import PipelineParams
 from services.model_export import to_site
@@ -118,9 +118,14 @@ def test_a_scene_folder_holds_what_the_cli_reads(tmp_path: Path) -> None:
 
 
 def test_the_junction_cues_read_outside_scenes(scene: CachedScene) -> None:
-    table = cue_table([scene], PipelineParams().placement)
+    scores = cue_scores([scene], PipelineParams().placement)
+    table = cue_table(scores)
     n = len(scene.truth["fragments"])
     true_pairs = list(table.columns[2].cells)
     false_pairs = list(table.columns[3].cells)
     assert true_pairs == [str(n)] * 3  # each fragment's true successor, once per cue
     assert false_pairs == [str(n * (n - 1) - n)] * 3
+    # Every pair falls in one bin of the structure evidence.
+    bins = evidence_table(*scores[STRUCTURE_CUE])
+    assert sum(int(str(c)) for c in bins.columns[1].cells) == n
+    assert sum(int(str(c)) for c in bins.columns[2].cells) == n * (n - 1) - n

@@ -13,6 +13,7 @@ from rich.console import Console
 from bench.placement_trust import (
     Outcome,
     bucket_table,
+    evidence_table,
     fragment_checks,
     hints_table,
     overlap_table,
@@ -45,6 +46,19 @@ def test_overlap_table_counts_every_ordered_pair_once(scene: CachedScene) -> Non
     true_count, false_count = (int(str(c)) for c in counts.cells)
     assert true_count == straight
     assert true_count + false_count == len(list(itertools.permutations(usable, 2)))
+
+
+def test_evidence_table_gives_each_bin_its_likelihood_ratio() -> None:
+    # 10 true pairs: 2 without evidence, 8 with full; 100 false: 96 without, 4 at 0.5.
+    true = [0.0] * 2 + [1.0] * 8
+    false = [0.0] * 96 + [0.5] * 4
+    table = evidence_table(true, false)
+    labels = list(table.columns[0].cells)
+    assert labels == ["0.0", "(0.0, 0.3]", "(0.3, 0.6]", "(0.6, 0.9]", "(0.9, 1.0]"]
+    assert list(table.columns[1].cells) == ["2", "0", "0", "0", "8"]
+    assert list(table.columns[2].cells) == ["96", "0", "4", "0", "0"]
+    # log((2 / 10) / (96 / 100)); a bin missing from either side has no ratio.
+    assert list(table.columns[3].cells) == ["-1.57", "-", "-", "-", "-"]
 
 
 def test_fragment_checks_judge_each_pose_relative_to_the_first(scene: CachedScene) -> None:
