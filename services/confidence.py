@@ -51,6 +51,7 @@ __all__ = [
     "calibration_features",
     "floorplan_diagonal",
     "fragment_confidences",
+    "free_pieces",
     "rank_assemblies",
     "room_slack",
     "same_room",
@@ -161,7 +162,7 @@ def _same_place(
 
 
 def calibration_features(
-    share: float, best: PlacementCandidate, pieces: int, truncated: bool
+    share: float, best: PlacementCandidate, pieces: float, truncated: bool
 ) -> FloatArray:
     """The calibration's inputs (``CALIBRATION_FEATURES``) for a main room."""
     clipped = min(max(share, _SHARE_CLIP), 1.0 - _SHARE_CLIP)
@@ -169,7 +170,7 @@ def calibration_features(
         [
             1.0,
             math.log(clipped / (1.0 - clipped)),
-            float(pieces),
+            pieces,
             best.features.get("closure", 0.0),
             best.features.get("conflict", 0.0),
             best.features.get("turns", 0.0),
@@ -214,7 +215,8 @@ def rank_assemblies(
     prior_sigmas : the standard deviation (m) of each piece's prior position, by id, for
         the pieces whose place a prior pose tells. The 'none of these' share and the
         calibration grow with the pieces the search had to place itself (fitted without
-        hints); a piece the fleet already placed is not one of those. Two priors or more
+        hints); a piece the fleet already placed is not one of those, and one whose prior
+        is wide (``placed_prior_sigma``) only in part (:func:`free_pieces`). Two priors or more
         also pin the pieces' positions that the junctions leave loose (``room_slack``).
 
     Returns
@@ -230,7 +232,7 @@ def rank_assemblies(
     for cand, group in zip(complete, groups, strict=True):
         weights[group] += math.exp(-(cand.energy - lowest))
     sigmas = prior_sigmas or {}
-    free = max(1, len(pieces) - sum(p.id in sigmas for p in pieces))
+    free = free_pieces([p.id for p in pieces], sigmas, params.placed_prior_sigma)
     unexplored = params.unexplored_energy + params.unexplored_per_piece * free
     shares = weights / (weights.sum() + math.exp(-unexplored))
     firsts = [complete[groups.index(g)] for g in range(len(polygons))]
@@ -256,6 +258,23 @@ def rank_assemblies(
         )
         for g in order
     ]
+
+
+def free_pieces(
+    ids: Sequence[str], prior_sigmas: Mapping[str, float], placed_sigma: float
+) -> float:
+    """How many pieces the search placed itself, for the calibration (at least 1): a piece
+    without a prior counts 1, one with a prior of position sigma s counts s / placed_sigma
+    (at most 1). A prior of a few decimeters pins its piece among the room's look-alike
+    walls; one as wide as a wall is long leaves the search to choose between them.
+
+    >>> free_pieces(["a", "b", "c", "d"], {"a": 0.3, "b": 3.0}, 1.5)
+    3.2
+    >>> free_pieces(["a"], {"a": 0.1}, 1.5)  # the calibration never saw fewer than one
+    1.0
+    """
+    counts = [min(1.0, prior_sigmas[i] / placed_sigma) if i in prior_sigmas else 1.0 for i in ids]
+    return max(1.0, round(sum(counts), 6))
 
 
 def _runner_up(shares: FloatArray, main: int, g: int, confidence: float) -> float:

@@ -95,12 +95,17 @@ def _none_share(assemblies) -> float:
     return 1.0 - sum(a.probability for a in assemblies)
 
 
-def test_none_of_these_share_follows_its_energy(l_room):
+def _l_room_placed(l_room) -> tuple[list[Piece], Placement, float]:
+    """The L room cut in four, its placement and its candidates' summed Boltzmann weights."""
     pieces = chains_from_polygon(l_room, [1.0, 9.5, 12.5, 20.0], [0, 1, 2, 3])
     placement = place_pieces(pieces, GEOMETRY)
     assert placement is not None
     lowest = placement.best.energy
-    weights = sum(math.exp(-(c.energy - lowest)) for c in placement.candidates)
+    return pieces, placement, sum(math.exp(-(c.energy - lowest)) for c in placement.candidates)
+
+
+def test_none_of_these_share_follows_its_energy(l_room):
+    pieces, placement, weights = _l_room_placed(l_room)
     shares = []
     for per_piece in (-0.5, -0.25, 0.0, 0.25):
         params = GEOMETRY.model_copy(update={"unexplored_per_piece": per_piece})
@@ -110,6 +115,26 @@ def test_none_of_these_share_follows_its_energy(l_room):
         shares.append(share)
     # 'none of these' is an energy: the more it costs per piece, the smaller its share.
     assert shares == sorted(shares, reverse=True) and len(set(shares)) == len(shares)
+
+
+def test_a_wide_prior_leaves_its_piece_to_the_search(l_room):
+    # The 'none of these' share counts the pieces the search placed: a prior as wide as
+    # placed_prior_sigma leaves its piece as free as none does; a narrow one mostly places it.
+    pieces, placement, weights = _l_room_placed(l_room)
+    params = GEOMETRY.model_copy(update={"unexplored_per_piece": -0.5})
+
+    def none_share(sigmas: dict[str, float]) -> float:
+        return _none_share(rank_assemblies(pieces, placement, params, sigmas))
+
+    def expected(free: float) -> float:
+        unexplored = math.exp(-(params.unexplored_energy - 0.5 * free))
+        return unexplored / (weights + unexplored)
+
+    wide = {p.id: params.placed_prior_sigma for p in pieces}
+    assert none_share(wide) == pytest.approx(none_share({})) == pytest.approx(expected(4))
+    narrow = {p.id: 0.2 * params.placed_prior_sigma for p in pieces[:3]}
+    assert none_share(narrow) == pytest.approx(expected(3 * 0.2 + 1))
+    assert none_share(narrow) < none_share(wide)
 
 
 def test_a_placement_without_complete_candidates_has_no_assemblies():
