@@ -224,10 +224,11 @@ def _table(title: str, headers: Sequence[str], left: int = 0) -> Table:
     return table
 
 
-def reliability_table(outcomes: Sequence[Outcome]) -> Table:
-    """Confidence bins against the share of right main results (calibration)."""
+def reliability_table(outcomes: Sequence[Outcome], of: str = "") -> Table:
+    """Confidence bins against the share of right main results (calibration); ``of`` names
+    the results in the title when they are not the benchmark's plain ones (priors)."""
     table = _table(
-        "Reliability: confidence vs share right",
+        f"Reliability{f' ({of})' if of else ''}: confidence vs share right",
         ("confidence", "results", "mean confidence", "right %", "said closed"),
     )
     confidence = np.array([o.confidence for o in outcomes])
@@ -611,6 +612,9 @@ def main(argv: list[str] | None = None) -> int:
         real_rooms = [s for s in scenes if s.name.endswith("_real")][: args.hints_real]
         rooms = "real room shapes"
         console.print(hints_table(real_rooms, sigma_xy, sigma_yaw, rooms, params, with_priors))
+    if with_priors:
+        priors = f"with priors of {sigma_xy} m and {sigma_yaw} deg"
+        console.print(reliability_table(with_priors, priors))
     if args.dump_hints:
         args.dump_hints.write_text(json.dumps([dataclasses.asdict(o) for o in with_priors]))
     console.print(f"total {(time.perf_counter() - started) / 60:.1f} min")

@@ -17,6 +17,7 @@ from bench.placement_trust import (
     fragment_checks,
     hints_table,
     overlap_table,
+    reliability_table,
 )
 from bench.world_scenes import CachedScene
 from services.pipeline import estimate_layout
@@ -108,3 +109,6 @@ def test_hints_table_records_each_scenes_outcome_with_priors(scene: CachedScene)
     table = hints_table([scene], 1.5, 20.0, record=record)
     assert [(o.name, o.seed, o.n) for o in record] == [("unit", scene.seed, scene.n_fragments)]
     assert table.row_count == 1  # one bucket
+    calibration = reliability_table(record, "with priors of 1.5 m and 20.0 deg")
+    assert "with priors of 1.5 m" in str(calibration.title)
+    assert calibration.row_count == 1 and calibration.caption.endswith("over 1 results")
