@@ -111,4 +111,4 @@ def test_hints_table_records_each_scenes_outcome_with_priors(scene: CachedScene)
     assert table.row_count == 1  # one bucket
     calibration = reliability_table(record, "with priors of 1.5 m and 20.0 deg")
     assert "with priors of 1.5 m" in str(calibration.title)
-    assert calibration.row_count == 1 and calibration.caption.endswith("over 1 results")
+    assert calibration.row_count == 1 and str(calibration.caption).endswith("over 1 results")
