@@ -178,7 +178,6 @@ def _mean_median(values: Sequence[float]) -> str:
 
 def bucket_table(outcomes: Sequence[Outcome], title: str) -> Table:
     """The main table: one row per set and bucket."""
-    table = Table(title=title, title_justify="left", box=box.SIMPLE)
     headers = [
         "set / fragments", "scenes", "ACC_global % (95 % interval)",
         "closed: right % (95 % interval)",
@@ -186,8 +185,7 @@ def bucket_table(outcomes: Sequence[Outcome], title: str) -> Table:
         "top-3 %", "ACC_local %", "rot. err mean/med deg", "transl. err mean/med %",
         "layout err %", "conf. mean", "time med / max s",
     ]  # fmt: skip
-    for header in headers:
-        table.add_column(header, justify="left" if header.startswith("set") else "right")
+    table = _table(title, headers, 1)
     for label, rows in bucket_groups(outcomes, totals=True):
         closed = [o for o in rows if o.status == "closed"]
         layout = [o.layout_error for o in rows if o.layout_error is not None]
@@ -437,11 +435,8 @@ def overlap_table(scenes: Iterable[CachedScene]) -> Table:
 
 def ablation_table(scenes: Sequence[CachedScene]) -> Table:
     """ACC_global per bucket with each energy term switched off."""
-    table = Table(title="Ablation: ACC_global % per bucket", title_justify="left", box=box.SIMPLE)
-    table.add_column("configuration")
     labels = sorted({bucket_of(s.n_fragments) for s in scenes}, key=lambda b: int(b.split("-")[0]))
-    for label in (*labels, "all"):
-        table.add_column(label, justify="right")
+    table = _table("Ablation: ACC_global % per bucket", ("configuration", *labels, "all"), 1)
     for name, change in ABLATIONS.items():
         params = PipelineParams(placement=PlacementParams(**change))
         outcomes = [run_scene(s, params) for s in scenes]
@@ -483,21 +478,17 @@ def hints_table(
         f"Hints ({rooms}): prior poses of {sigma_xy} m and {sigma_yaw} deg, alone and with "
         "the layouts"
     )
-    table = Table(title=title, title_justify="left", box=box.SIMPLE)
     headers = (
         "fragments",
         "scenes",
         "priors alone: rot. deg / transl. %",
         "with layouts: ACC_global %",
-    )
-    for header in (
-        *headers,
         "closed (right %)",
         "rot. err mean deg",
         "transl. err mean %",
         "time med s",
-    ):
-        table.add_column(header, justify="right")
+    )
+    table = _table(title, headers)
     rows: dict[str, list[tuple[Outcome, list[tuple[float, float]]]]] = {}
     for scene in scenes:
         hints = noisy_priors(scene, sigma_xy, sigma_yaw)

@@ -294,7 +294,7 @@ class PlacementParams(_Frozen):
         "not by the search, in proportion to how much narrower than this (meters, its "
         "position's standard deviation) the prior is: a prior this wide or wider leaves its "
         "piece as free as one without (priors of 1.5 m / 20 deg on the tune split: counted "
-        "as placed, 9-16 fragment rooms right 36 % at confidence 0.16, 81 % at 0.38; Brier "
+        "as placed, 9-16 fragment rooms right 36 % at confidence 0.16, 83 % at 0.38; Brier "
         "0.097 -> 0.080)",
     )
     confidence_coefficients: tuple[float, ...] = Field(

@@ -268,13 +268,13 @@ def free_pieces(
     (at most 1). A prior of a few decimeters pins its piece among the room's look-alike
     walls; one as wide as a wall is long leaves the search to choose between them.
 
-    >>> free_pieces(["a", "b", "c", "d"], {"a": 0.3, "b": 3.0}, 1.5)
+    >>> round(free_pieces(["a", "b", "c", "d"], {"a": 0.3, "b": 3.0}, 1.5), 6)
     3.2
     >>> free_pieces(["a"], {"a": 0.1}, 1.5)  # the calibration never saw fewer than one
     1.0
     """
     counts = [min(1.0, prior_sigmas[i] / placed_sigma) if i in prior_sigmas else 1.0 for i in ids]
-    return max(1.0, round(sum(counts), 6))
+    return max(1.0, sum(counts))
 
 
 def _runner_up(shares: FloatArray, main: int, g: int, confidence: float) -> float:
