@@ -53,6 +53,7 @@ from services.placement.priors import (
     HintPair,
     SiteHints,
     frame_estimate,
+    frame_yaw_fit,
     position_costs,
     position_costs_batch,
     robust_cost,
@@ -121,6 +122,8 @@ class Placement:
     measured: overlap (negative) or gap along the wall, m, of each ordered pair of pieces
     (a's target, b's source, by id) whose ends' structure pins it down; the refinement takes
     it from here instead of registering the ends again.
+    frame_yaw: with prior poses, the yaw (radians) of the site frame in the hints frame that
+    the candidates' prior terms were scored with (see :func:`place_pieces`); else None.
     """
 
     best: PlacementCandidate
@@ -130,6 +133,7 @@ class Placement:
     exhaustive: bool
     closed: bool
     measured: Mapping[tuple[str, str], float] = field(default_factory=dict)
+    frame_yaw: float | None = None  # the hints frame's yaw the priors were scored in
 
     @property
     def candidates(self) -> tuple[PlacementCandidate, ...]:
@@ -148,6 +152,9 @@ class _Search:
     # Structure scores, boundary mismatches and measured overlaps of the ordered pairs (see
     # _pair_evidence): given when another search of the same pieces has them already.
     evidence: InitVar[_PairEvidence | None] = None
+    # The hints frame's yaw when an assembly has told it (see place_pieces); None: the
+    # priors' own estimate.
+    frame_yaw: InitVar[float | None] = None
     weights: FloatArray = field(init=False)
     noise: JunctionNoise = field(init=False)
     structure: FloatArray = field(init=False)  # [a, b]: structure score of b after a
@@ -186,7 +193,7 @@ class _Search:
     nodes: int = 0
     counter: itertools.count[int] = field(default_factory=itertools.count)
 
-    def __post_init__(self, evidence: _PairEvidence | None) -> None:
+    def __post_init__(self, evidence: _PairEvidence | None, frame_yaw: float | None) -> None:
         n = len(self.pieces)
         self.finish_exactly = self.require_closed and n < self.params.large_site_pieces
         self.weights = feature_weights(self.params, self.pieces)
@@ -200,6 +207,8 @@ class _Search:
             np.fill_diagonal(cost, _SAME_PIECE)
         self.junction = cost
         self.frame = frame_estimate(self.pieces[0].id, self.hints.priors) if self.pieces else None
+        if self.frame is not None and frame_yaw is not None:
+            self.frame = FrameEstimate(frame_yaw, self.frame.variance)
         yaw = 0.0 if self.frame is None else self.frame.yaw
         self.frame_turn = (math.cos(yaw), math.sin(yaw))
         self.rotation_cost = _rotation_costs(self.pieces, self.hints, self.frame)
@@ -421,6 +430,21 @@ def _crosses(new: FloatArray, placed: FloatArray) -> bool:
     return bool(_crossing(new.T[:, :, None], placed.T).any())  # (W, 1) against (P,)
 
 
+def _crosses_closed(search: _Search, state: _State, walls: FloatArray, end: FloatArray) -> bool:
+    """Whether the walls of a piece appended to ``state`` (``walls`` where it lies, its
+    target at ``end``) cross the placed ones even where the loop's closing gap is taken up:
+    the last piece of a closed search is also tried moved onto the first piece's source.
+
+    Laid end to end, a loop carries every junction's overlap or gap to its last junction
+    (a metre and more over six real junctions), where the refinement closes it; the last
+    piece then lies that far off and may cross the first's walls. Which piece is last
+    depends only on which is fixed first, so without this a loop could be valid or not by
+    the fragments' names or priors. Pieces before the last are tested where they lie.
+    """
+    closing = search.require_closed and len(state.order) + 1 == len(search.pieces)
+    return not closing or _crosses(shift_walls(walls, -end), state.walls)
+
+
 def _crossing(new: FloatArray, placed: FloatArray) -> NDArray[np.bool_]:
     """Which new walls cross or overlap which placed ones: ``new`` and ``placed`` hold
     (axis, offset, lo, hi) along their first dimension, the rest broadcast together."""
@@ -601,16 +625,17 @@ def _extend(
     walls: FloatArray | None = None,
 ) -> _State | None:
     """The state with piece j appended after a junction that turns by ``turn``, or None
-    when its walls would cross the placed ones. ``position``: the child's position costs
-    when already known (:func:`_children`); ``walls``: the child's walls where it lies,
-    when already known to cross nothing (:func:`_children_walls`)."""
+    when its walls would cross the placed ones (:func:`_crosses_closed` for the piece that
+    closes the loop). ``position``: the child's position costs when already known
+    (:func:`_children`); ``walls``: the child's walls where it lies, when already known to
+    cross nothing (:func:`_children_walls`)."""
     piece = search.pieces[j]
     rotation = (state.heading + turn - piece.directions[0]) % 4
     local_pts, local_walls, local_samples = piece.rotated[rotation]
     pts = local_pts + state.end
     if walls is None:
         walls = shift_walls(local_walls, state.end)
-        if _crosses(walls, state.walls):
+        if _crosses(walls, state.walls) and _crosses_closed(search, state, walls, pts[-1]):
             return None
     samples = local_samples + state.end
     heading_out = (piece.directions[0] + rotation) % 4
@@ -813,10 +838,10 @@ def _beam(search: _Search, root: _State, width: int) -> None:
                     children.rotation[chunk],
                 )  # fmt: skip
                 first, checked = i, i + len(chunk)
-            if crosses[i - first]:
+            own = walls[i - first, : search.wall_count[j]]
+            if crosses[i - first] and _crosses_closed(search, state, own, children.end[c]):
                 continue
             position = None if children.position is None else children.position[c]
-            own = walls[i - first, : search.wall_count[j]]
             child = _extend(search, state, j, turns[c], position, own)
             assert child is not None  # its walls cross nothing
             seen.add(key)
@@ -1228,25 +1253,78 @@ def place_pieces(
     Returns
     -------
     Placement or None when no placement exists (not even an open one).
+
+    With prior poses the search scores them in a hints frame whose yaw the priors alone
+    tell only modulo a quarter turn, which a wide yaw prior (20 degrees) blurs: their
+    estimate is then sometimes 20-30 degrees off, and every prior is read turned by that.
+    The best closed loop found knows each piece's quarter turn, so it tells the yaw without
+    that ambiguity: when it differs by more than ``params.frame_refit_deg``, the pieces are
+    searched again in the refitted frame (up to three times, each search starting from the
+    loops the last one found; within ``params.restart_nodes`` when the first was cut
+    short), and the placement of lower energy is kept: the frame's yaw is fitted with the
+    assembly, as its shift already is.
     """
     if not pieces:
         return None
     hints = hints or SiteHints()
-    n = len(pieces)
-    nodes = 0
-    search = None
-    for require_closed in (True, False):
-        # The open search (partial chains, when no closed loop was found) has a budget of
-        # its own: what the closed one spent must not leave nothing to place.
-        evidence = None if search is None else search.pair_evidence(range(n))
-        search = _Search(list(pieces), params, hints, require_closed, evidence)
-        _explore(search)
-        if search.top:
-            break
-        nodes += search.nodes
-    assert search is not None
-    if not search.top:
+    placement, search = _place(pieces, params, hints, None, None)
+    if placement is None or search is None:
         return None
+    for _ in range(_FRAME_REFITS):
+        if not placement.closed or search.frame is None:
+            break
+        yaw = _assembly_frame_yaw(placement, hints)
+        change = (
+            wrap_angle(4.0 * (yaw - search.frame.yaw)) / 4.0
+        )  # the frame's quarter turn is free
+        if abs(change) <= math.radians(params.frame_refit_deg):
+            break
+        evidence = search.pair_evidence(range(len(pieces)))
+        # A search cut short is searched again within the restart budget: it starts from
+        # the loops already found, and a site of many pieces would spend the full budget
+        # on every pass.
+        budget = params
+        if not placement.exhaustive:
+            budget = params.model_copy(update={"max_search_nodes": params.restart_nodes})
+        refit, again = _place(pieces, budget, hints, yaw, evidence, placement.candidates)
+        if refit is None or again is None or not refit.closed:
+            break
+        nodes = placement.nodes_searched + refit.nodes_searched
+        if refit.best.energy >= placement.best.energy:
+            placement = replace(placement, nodes_searched=nodes)
+            break
+        placement, search = replace(refit, nodes_searched=nodes), again
+    return placement
+
+
+_FRAME_REFITS = 3  # searches again in a frame refitted from the best loop, at most
+
+
+def _assembly_frame_yaw(placement: Placement, hints: SiteHints) -> float:
+    """The hints frame's yaw at which the best loop's priors cost least (its pieces' quarter
+    turns and sources in the site frame)."""
+    best = placement.best
+    rotations = dict(zip(best.order, best.rotations, strict=True))
+    sources = dict(zip(best.order, placement.translations, strict=True))
+    return frame_yaw_fit(hints.priors, rotations, sources)
+
+
+def _place(
+    pieces: Sequence[Piece],
+    params: PlacementParams,
+    hints: SiteHints,
+    frame_yaw: float | None,
+    evidence: _PairEvidence | None,
+    known: Sequence[PlacementCandidate] = (),
+) -> tuple[Placement | None, _Search | None]:
+    """One search of the pieces, closed loops first, then open chains if none closes, with
+    the hints frame at ``frame_yaw`` (None: the priors' estimate); also the search whose
+    placements these are. ``known``: closed loops of an earlier search, scored in this one
+    before it starts, so that it prunes against them from its first node."""
+    n = len(pieces)
+    search, nodes = _closed_then_open(pieces, params, hints, frame_yaw, evidence, known)
+    if not search.top:
+        return None, None
     if search.require_closed and search.truncated and search.frame is None:
         for j in _restart_roots(n, params.restart_roots):
             nodes += _restart(search, j)
@@ -1257,11 +1335,11 @@ def place_pieces(
             # An exhaustive search's best is optimal; one cut short may have passed loops a
             # move away from it that are better still.
             polished = _polish(search, min(found, key=lambda c: c.energy))
-            known = {(c.order, c.rotations) for c in polished}
-            found = polished + [c for c in found if (c.order, c.rotations) not in known]
+            seen = {(c.order, c.rotations) for c in polished}
+            found = polished + [c for c in found if (c.order, c.rotations) not in seen]
     nodes += search.nodes
     ranked = sorted(found, key=lambda c: c.energy)
-    return Placement(
+    placement = Placement(
         best=ranked[0],
         translations=translations_of(pieces, ranked[0]),
         alternatives=tuple(ranked[1:]),
@@ -1269,7 +1347,40 @@ def place_pieces(
         exhaustive=not search.truncated,
         closed=search.require_closed,
         measured=search.measured,
+        frame_yaw=None if search.frame is None else search.frame.yaw,
     )
+    return placement, search
+
+
+def _closed_then_open(
+    pieces: Sequence[Piece],
+    params: PlacementParams,
+    hints: SiteHints,
+    frame_yaw: float | None,
+    evidence: _PairEvidence | None,
+    known: Sequence[PlacementCandidate],
+) -> tuple[_Search, int]:
+    """The search for closed loops (``known`` scored first), or for open chains when no
+    loop closes; and the nodes a closed search that found nothing spent."""
+    nodes = 0
+    search = None
+    for require_closed in (True, False):
+        # The open search (partial chains, when no closed loop was found) has a budget of
+        # its own: what the closed one spent must not leave nothing to place.
+        if search is not None:
+            evidence = search.pair_evidence(range(len(pieces)))
+        search = _Search(list(pieces), params, hints, require_closed, evidence, frame_yaw)
+        if require_closed:
+            for cand in known:
+                state = _placed_loop(search, [search.index[i] for i in cand.order], cand.rotations)
+                if state is not None:
+                    _close(search, state)
+        _explore(search)
+        if search.top:
+            break
+        nodes += search.nodes
+    assert search is not None
+    return search, nodes
 
 
 def _explore(search: _Search) -> None:
@@ -1545,17 +1656,20 @@ def evaluate_placement(
     rotations: Sequence[int],
     params: PlacementParams = PlacementParams(),
     hints: SiteHints | None = None,
+    frame_yaw: float | None = None,
 ) -> PlacementCandidate | None:
     """Energy of one given closed placement, or None when it is not a valid closed loop.
 
     The same energy the search minimises; used to check the search against brute force,
-    to score the truth in benchmarks and a placement a user proposes.
+    to score the truth in benchmarks and a placement a user proposes. frame_yaw: the hints
+    frame's yaw to score prior poses in (:attr:`Placement.frame_yaw`); None: the priors'
+    own estimate.
     """
     by_id = {p.id: i for i, p in enumerate(pieces)}
     if order[0] != pieces[0].id or rotations[0] != 0 or sorted(order) != sorted(by_id):
         return None
     one = params.model_copy(update={"top_k": 1})
-    search = _Search(list(pieces), one, hints or SiteHints(), True)
+    search = _Search(list(pieces), one, hints or SiteHints(), True, None, frame_yaw)
     state = _placed_loop(search, [by_id[fid] for fid in order], rotations)
     if state is None:
         return None

@@ -20,7 +20,13 @@ from services.placement import (
 )
 from services.placement import search as search_module
 from services.placement.pieces import FreeSpace, shift_walls
-from services.placement.priors import HintPair, PiecePrior, position_costs_batch
+from services.placement.priors import (
+    HintPair,
+    PiecePrior,
+    frame_estimate,
+    position_costs_batch,
+    wrap_angle,
+)
 from tests.conftest import UNTUNED, bare_piece, chains_from_polygon, point_at_arc
 
 pytestmark = pytest.mark.timeout(120)
@@ -63,13 +69,15 @@ def _random_cuts(rng: np.random.Generator, n: int) -> list[float]:
             return cuts
 
 
-def _all_closed(pieces, params, hints=None):
-    """Every valid closed placement (brute force over orders and rotations)."""
+def _all_closed(pieces, params, hints=None, frame_yaw=None):
+    """Every valid closed placement (brute force over orders and rotations), priors scored
+    in a hints frame of yaw ``frame_yaw`` (None: the priors' estimate)."""
     rest = [p.id for p in pieces[1:]]
     found = []
     for perm in itertools.permutations(rest):
         for rots in itertools.product(range(4), repeat=len(rest)):
-            cand = evaluate_placement(pieces, (pieces[0].id, *perm), (0, *rots), params, hints)
+            order, rotations = (pieces[0].id, *perm), (0, *rots)
+            cand = evaluate_placement(pieces, order, rotations, params, hints, frame_yaw)
             if cand is not None:
                 found.append(cand)
     return found
@@ -116,15 +124,16 @@ def test_search_finds_the_brute_force_minimum(l_room, seed):
 @pytest.mark.parametrize("seed", range(3))
 def test_search_with_priors_finds_the_brute_force_minimum(l_room, seed):
     # Priors near the truth, in a hints frame turned by 30 degrees: the prior costs enter
-    # the bounds, which must stay lower bounds.
+    # the bounds, which must stay lower bounds. In the frame the search settled on (the
+    # priors' estimate, or the one its best loop refitted), its best is the least of all.
     rng = np.random.default_rng(100 + seed)
     cuts = _random_cuts(rng, 4)
     turns = rng.integers(0, 4, 4).tolist()
     pieces = chains_from_polygon(l_room, cuts, turns)
     hints = _truth_priors(l_room, cuts, turns, rng, noise=(0.8, 0.3))
     placement = place_pieces(pieces, GEOMETRY, hints)
-    every = _all_closed(pieces, GEOMETRY, hints)
     assert placement is not None and placement.exhaustive
+    every = _all_closed(pieces, GEOMETRY, hints, placement.frame_yaw)
     assert placement.best.energy == pytest.approx(min(c.energy for c in every), abs=1e-9)
     assert placement.best.features["prior"] > 0.0  # the priors did take part
 
@@ -1025,6 +1034,68 @@ def test_priors_pick_the_right_room_when_the_first_pieces_yaw_is_far_off(l_room)
     assert list(placement.best.rotations) == [0, 3, 2, 1]
     # The far-off prior costs about what a Cauchy loss gives one outlier, no more.
     assert placement.best.features["prior"] < 4.0
+
+
+def test_priors_whose_yaws_blur_the_frame_are_read_in_the_frame_the_loop_tells(l_room):
+    # Twelve priors of 20 degrees whose yaw errors, taken modulo a quarter turn (all the
+    # priors alone can tell), put the hints frame's yaw 33 degrees off its true 28.6: read
+    # in that frame every prior misleads. The best loop knows each piece's quarter turn,
+    # so the frame refitted from it is right, and the search run again there finds the room.
+    errors = np.radians([-48, 7, -28, -30, 14, -24, 0, 22, 16, 31, 18, -36])
+    cuts = [0.5 + 28.0 / 12 * k for k in range(12)]
+    turns = [k % 4 for k in range(12)]
+    pieces = chains_from_polygon(l_room, cuts, turns)
+    exact = _truth_priors(l_room, cuts, turns).priors
+    blurred_yaws = zip(exact.items(), errors, strict=True)
+    priors = {k: dataclasses.replace(p, yaw=p.yaw + e) for (k, p), e in blurred_yaws}
+    hints = SiteHints(priors=priors)
+    truth = (tuple(f"p{k}" for k in range(12)), (0, 3, 2, 1) * 3)
+
+    def off(yaw: float) -> float:  # degrees from the true frame, modulo a quarter turn
+        return abs(math.degrees(wrap_angle(4.0 * (yaw - 0.5)) / 4.0))
+
+    estimate = frame_estimate("p0", priors)
+    assert estimate is not None and off(estimate.yaw) > 30.0
+    once = GEOMETRY.model_copy(update={"frame_refit_deg": 360.0})  # the estimate only
+    blurred = place_pieces(pieces, once, hints)
+    assert blurred is not None and (blurred.best.order, blurred.best.rotations) != truth
+    # The wrong loop found first agrees with the wrong frame within 5 degrees (the default
+    # threshold does not search again); at 2 the refits lead to the room.
+    assert off(search_module._assembly_frame_yaw(blurred, hints)) > 25.0
+    refit = GEOMETRY.model_copy(update={"frame_refit_deg": 2.0})
+    placement = place_pieces(pieces, refit, hints)
+    assert placement is not None and placement.frame_yaw is not None
+    assert (placement.best.order, placement.best.rotations) == truth
+    assert off(placement.frame_yaw) < 1.0
+    assert placement.best.energy < blurred.best.energy
+    # Scored in the frame the search settled on, the loop has the energy it was given.
+    again = evaluate_placement(pieces, *truth, refit, hints, placement.frame_yaw)
+    assert again is not None and again.energy == pytest.approx(placement.best.energy)
+
+
+def test_a_loop_is_valid_whichever_piece_is_fixed_first():
+    # Laid end to end from the first piece, a loop carries its junctions' overlaps and gaps
+    # (here 0.3 m up the right wall, 0.5 m short along the top) to its last junction, where
+    # the last piece then runs over the first's corner. Fixed first, any piece must give
+    # the same valid loop: which is first depends only on names or priors.
+    rect = np.array([[0, 0], [6, 0], [6, 4], [0, 4]], dtype=np.float64)
+    pieces = chains_from_polygon(rect, [5.7, 8.0, 13.0, 18.0], [0, 0, 0, 0])
+
+    def lengthened(piece: Piece, by: float) -> Piece:
+        keypoints = piece.keypoints.copy()
+        last = keypoints[-1] - keypoints[-2]
+        keypoints[-1] += by * last / np.linalg.norm(last)
+        return dataclasses.replace(piece, keypoints=keypoints)
+
+    pieces = [lengthened(p, by) for p, by in zip(pieces, [0.3, -0.5, 0.0, 0.0], strict=True)]
+    search = search_module._Search(pieces, GEOMETRY, SiteHints(), True)
+    laid = search_module._placed_loop(search, [0, 1, 2, 3], [0, 0, 0, 0])
+    assert laid is not None
+    # Where it lies, the last piece's bottom wall runs across the first's right wall.
+    assert search_module._crosses(laid.walls[-1:], laid.walls[:2])
+    for k in range(4):
+        led = pieces[k:] + pieces[:k]
+        assert evaluate_placement(led, [p.id for p in led], [0, 0, 0, 0], GEOMETRY) is not None
 
 
 def test_priors_pick_the_assignment_of_identical_pieces():
