@@ -58,9 +58,8 @@ from schemas.hints import HintsModel
 from schemas.params import PipelineParams
 from services.evaluation import evaluate_result
 from services.pipeline import place_site, site_pieces
-from services.placement import evaluate_placement, translations_of
+from services.placement import evaluate_placement, loop_frame_yaw
 from services.placement.energy import FEATURES, feature_weights
-from services.placement.priors import frame_yaw_fit
 from services.stations import counts_stations, with_station_scored
 from services.synthetic.render import CAMERAS
 
@@ -116,9 +115,7 @@ def anatomy_of(
     if site_hints.priors:
         # The search fits the hints frame's yaw to its loops (place_pieces): the truth is
         # scored in the frame it tells too, when that costs it less.
-        sources = dict(zip(truth.order, translations_of(pieces, truth), strict=True))
-        turns = dict(zip(truth.order, truth.rotations, strict=True))
-        yaw = frame_yaw_fit(site_hints.priors, turns, sources)
+        yaw = loop_frame_yaw(pieces, truth, site_hints)
         refit = evaluate_placement(pieces, order, rotations, params.placement, site_hints, yaw)
         truth = truth if refit is None or refit.energy >= truth.energy else refit
     if counts_stations(pieces, params.placement):

@@ -11,6 +11,7 @@ from services.placement.search import (
     Placement,
     PlacementCandidate,
     evaluate_placement,
+    loop_frame_yaw,
     place_pieces,
     translations_of,
 )
@@ -24,6 +25,7 @@ __all__ = [
     "evaluate_placement",
     "evidence_share",
     "hint_pairs",
+    "loop_frame_yaw",
     "make_piece",
     "piece_prior",
     "place_pieces",

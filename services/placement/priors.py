@@ -123,6 +123,12 @@ def robust_cost(squared: float) -> float:
     return _ROBUST_SCALE * math.log1p(0.5 * squared / _ROBUST_SCALE)
 
 
+def _robust_costs(squared: FloatArray) -> FloatArray:
+    """:func:`robust_cost` of every element of an array."""
+    costs: FloatArray = _ROBUST_SCALE * np.log1p(0.5 * squared / _ROBUST_SCALE)
+    return costs
+
+
 def _cauchy_weights(misfit: FloatArray) -> FloatArray:
     """Weights of the reweighted least squares whose loss is :func:`robust_cost`."""
     weights: FloatArray = 1.0 / (1.0 + 0.5 * misfit / _ROBUST_SCALE)
@@ -190,7 +196,7 @@ def frame_yaw_fit(
     turned = np.array([priors[i].yaw - rotations[i] * math.pi / 2 for i in ids])  # (k,)
     yaw_sigma = np.array([priors[i].sigma_yaw for i in ids])
     residual = (turned[None, :] - grid[:, None] + math.pi) % (2.0 * math.pi) - math.pi
-    yaw_cost = _ROBUST_SCALE * np.log1p(0.5 * (residual / yaw_sigma) ** 2 / _ROBUST_SCALE)
+    yaw_cost = _robust_costs((residual / yaw_sigma) ** 2)
     placed = np.array([sources[i] for i in ids])  # (k, 2)
     cos, sin = np.cos(grid)[:, None], np.sin(grid)[:, None]
     anchors = np.empty((len(grid), len(ids), 5))
@@ -316,7 +322,7 @@ def _robust_fit(dx: FloatArray, dy: FloatArray, w: FloatArray) -> FloatArray:
         ex, ey = dx - shift[:, :, 0], dy - shift[:, :, 1]
         misfit = (ex * ex + ey * ey) * w
         weights = w / (misfit * half + 1.0)  # w times the Cauchy weight (_cauchy_weights)
-    costs: FloatArray = (_ROBUST_SCALE * np.log1p(half * misfit)).sum(axis=1)
+    costs: FloatArray = _robust_costs(misfit).sum(axis=1)
     return costs
 
 

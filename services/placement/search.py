@@ -65,6 +65,7 @@ __all__ = [
     "Placement",
     "PlacementCandidate",
     "evaluate_placement",
+    "loop_frame_yaw",
     "place_pieces",
     "translations_of",
 ]
@@ -1273,10 +1274,9 @@ def place_pieces(
     for _ in range(_FRAME_REFITS):
         if not placement.closed or search.frame is None:
             break
-        yaw = _assembly_frame_yaw(placement, hints)
-        change = (
-            wrap_angle(4.0 * (yaw - search.frame.yaw)) / 4.0
-        )  # the frame's quarter turn is free
+        yaw = loop_frame_yaw(pieces, placement.best, hints)
+        # The frame's quarter turn is the assembly's to choose: compare modulo one.
+        change = wrap_angle(4.0 * (yaw - search.frame.yaw)) / 4.0
         if abs(change) <= math.radians(params.frame_refit_deg):
             break
         evidence = search.pair_evidence(range(len(pieces)))
@@ -1300,12 +1300,11 @@ def place_pieces(
 _FRAME_REFITS = 3  # searches again in a frame refitted from the best loop, at most
 
 
-def _assembly_frame_yaw(placement: Placement, hints: SiteHints) -> float:
-    """The hints frame's yaw at which the best loop's priors cost least (its pieces' quarter
-    turns and sources in the site frame)."""
-    best = placement.best
-    rotations = dict(zip(best.order, best.rotations, strict=True))
-    sources = dict(zip(best.order, placement.translations, strict=True))
+def loop_frame_yaw(pieces: Sequence[Piece], cand: PlacementCandidate, hints: SiteHints) -> float:
+    """The hints frame's yaw at which a closed loop's priors cost least (its pieces' quarter
+    turns and sources in the site frame, :func:`priors.frame_yaw_fit`)."""
+    rotations = dict(zip(cand.order, cand.rotations, strict=True))
+    sources = dict(zip(cand.order, translations_of(pieces, cand), strict=True))
     return frame_yaw_fit(hints.priors, rotations, sources)
 
 

@@ -15,6 +15,7 @@ from services.placement import (
     Piece,
     SiteHints,
     evaluate_placement,
+    loop_frame_yaw,
     place_pieces,
     translations_of,
 )
@@ -1061,7 +1062,7 @@ def test_priors_whose_yaws_blur_the_frame_are_read_in_the_frame_the_loop_tells(l
     assert blurred is not None and (blurred.best.order, blurred.best.rotations) != truth
     # The wrong loop found first agrees with the wrong frame within 5 degrees (the default
     # threshold does not search again); at 2 the refits lead to the room.
-    assert off(search_module._assembly_frame_yaw(blurred, hints)) > 25.0
+    assert off(loop_frame_yaw(pieces, blurred.best, hints)) > 25.0
     refit = GEOMETRY.model_copy(update={"frame_refit_deg": 2.0})
     placement = place_pieces(pieces, refit, hints)
     assert placement is not None and placement.frame_yaw is not None
