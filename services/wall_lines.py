@@ -580,7 +580,7 @@ def _lines_from_peak(
 
 
 def _occluded_links(
-    lines: list[WallLine], grid: _Grid, camera: FloatArray | None = None
+    lines: list[WallLine], grid: _Grid, camera: FloatArray | None = None, jambs: bool = False
 ) -> list[WallLine]:
     """Deduced walls joining misaligned parallel segments that face the same interior.
 
@@ -594,6 +594,11 @@ def _occluded_links(
     walls' seen runs, so floor seen past a pillar's far side does not count against it.
     A step deeper than ``_ONE_CAMERA_REACH`` is bridged only where it closes an arm of the
     room (:func:`_closes_an_arm`).
+
+    With ``jambs`` (clouds) no bridge stands at a wall's end next to a door or window of its
+    line (:func:`_opening_near`): that end is a jamb, the wall goes on over the opening, and
+    the other wall is one seen through it (a scan cut in a doorway). A frame's line shows
+    such cells where its view ends too (wall seen only high up): frames keep those bridges.
     """
     cell = grid.cell
     longest = _OCCLUSION_REACH if camera is None else _MAX_ARM_DEPTH
@@ -611,7 +616,7 @@ def _occluded_links(
                     start = seg_b[0] if a.travel > 0 else seg_b[1]
                     if -2 * cell <= (start - end) * a.travel <= reach:
                         deduced += _hidden_walls(
-                            a, b, (seg_a, seg_b), (end, start), grid, camera, lines
+                            a, b, (seg_a, seg_b), (end, start), grid, camera, lines, jambs
                         )
     return deduced
 
@@ -624,10 +629,11 @@ def _hidden_walls(
     grid: _Grid,
     camera: FloatArray | None,
     lines: list[WallLine],
+    jambs: bool,
 ) -> list[WallLine]:
     """The bridges of :func:`_occluded_links` from a segment of line ``a`` over to the next
     segment of ``b`` along their travel (``segments``: the two, ``gap``: the run where the
-    first ends and the second starts)."""
+    first ends and the second starts; ``jambs``: none from a doorway's side)."""
     seg_a, seg_b = segments
     end, start = gap
     runs: tuple[float, ...] = (end, start)
@@ -645,12 +651,24 @@ def _hidden_walls(
         runs = (end,) if a_nearer else (start,)
         shorter = min(seg_a[1] - seg_a[0], seg_b[1] - seg_b[0])
         depth = float(np.clip(shorter, _MIN_BEHIND, _FAR_STRIP))
+    if jambs and (_opening_near(a, end) or _opening_near(b, start)):
+        return []  # a doorway's jamb, not a wall's end: the wall goes on over the door
     bridges = (_bridge(a, b, run) for run in runs)
     return [
         br
         for br in bridges
         if _bounds_scan(br, grid, depth) and not _explained(br, lines, grid.cell)
     ]
+
+
+def _opening_near(line: WallLine, run: float) -> bool:
+    """Whether ``line`` has a door or window cell (:func:`_opening`) within two cells of
+    run coordinate ``run`` (a segment's end)."""
+    if line.lintel is None or line.seen_through is None:
+        return False
+    at = int(np.floor((run - line.origin) / line.cell_size))
+    lo, hi = max(at - _MAX_GAP_CELLS, 0), max(at + _MAX_GAP_CELLS + 1, 0)
+    return bool(_opening(line)[lo:hi].any())
 
 
 def _closes_an_arm(
@@ -814,7 +832,7 @@ def find_wall_lines(
         lines = _facing_cameras(lines, views, params)
     lines = [line for line in lines if not _seen_through_opening(line, lines)]
     camera = views[0].centre[:2] if len(views) == 1 else None
-    return lines + _occluded_links(lines, grid, camera)
+    return lines + _occluded_links(lines, grid, camera, jambs=not views)
 
 
 def _faces_away(

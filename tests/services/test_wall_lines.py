@@ -780,3 +780,47 @@ def test_a_wall_beside_a_door_is_wall_though_the_floor_seen_through_it_lies_behi
     cells = line.origin + (np.flatnonzero(line.high) + 0.5) * line.cell_size
     assert cells.min() < 0.2 and cells.max() > 2.1  # both piers are wall
     assert not np.any((cells > 0.8) & (cells < 1.5))  # the door is not
+
+
+def _line_with_opening(
+    offset: float, wall: np.ndarray, opening: np.ndarray, segments: list[list[float]]
+) -> WallLine:
+    """A wall line along x (interior y > ``offset``) on 0.1 m cells from run 0: whole wall
+    where ``wall``; where ``opening``, wall points only high up and space seen behind."""
+    return WallLine(
+        axis=0,
+        offset=offset,
+        travel=1,
+        origin=0.0,
+        cell_size=0.1,
+        high=wall.copy(),
+        segments=np.array(segments, dtype=np.float64),
+        virtual=False,
+        unsupported=np.zeros(len(wall), dtype=bool),
+        seen_through=opening.copy(),
+        occupied=wall | opening,
+        lintel=opening.copy(),
+    )
+
+
+def test_no_hidden_wall_is_deduced_from_a_doorway_to_a_wall_seen_through_it() -> None:
+    # The scan's wall y = 0 starts at x = 1.0, after a doorway (x 0.7-1.0) it was cut in;
+    # through the door it sees 0.3 m of the next room's wall at y = -2.0. Bridging the two
+    # would put a 2 m wall across the next room, and the chain out of the room along it.
+    rng = np.random.default_rng(7)
+    floor = np.column_stack([rng.uniform(0.0, 5.0, 6000), rng.uniform(0.1, 4.0, 6000)])
+    grid = _make_grid(floor, 0.1, np.ones(len(floor), dtype=bool))
+    cells = np.arange(50)
+    wall, doorway = cells >= 10, (cells >= 7) & (cells < 10)
+    # The next room's wall, seen over the doorway's width.
+    through = _line_with_opening(-2.0, doorway, np.zeros(50, bool), [[0.7, 1.0]])
+
+    def bridges(near_end: np.ndarray) -> list[float]:
+        own = _line_with_opening(0.0, wall, near_end, [[1.0, 5.0]])
+        bridged = _occluded_links([through, own], grid, jambs=True)
+        return [ln.offset for ln in bridged if ln.virtual]
+
+    # The same lines with nothing seen past the wall's start: a step of the room whose side
+    # the scan did not see, bridged where the two walls meet.
+    assert set(bridges(np.zeros(50, dtype=bool))) == {1.0}
+    assert bridges(doorway) == []
