@@ -964,7 +964,16 @@ def _seen_through_opening(far: WallLine, lines: Sequence[WallLine]) -> bool:
         standing = maximum_filter1d((near.high | near.lintel).astype(np.uint8), 3) > 0
         known = (near.occupied if near.occupied is not None else near.high) | near.seen_through
         seen = far_cells[known[far_cells]]
-        in_front = np.flatnonzero(_opening(near)[first:last]) + first
+        # An opening is a run of cells, as in _through_openings: single columns seen only
+        # high up are stray points over the floor, not a lintel.
+        in_front = np.array(
+            [
+                k
+                for i, j in _runs(_opening(near), 0, _SEEN_OPENING_CELLS)
+                for k in range(max(i, first), min(j, last))
+            ],
+            dtype=np.intp,
+        )
         if (
             len(seen)
             and np.mean(standing[seen]) >= 0.5

@@ -23,6 +23,7 @@ from services.wall_lines import (
     _make_grid,
     _occluded_links,
     _runs,
+    _seen_through_opening,
     _shadowed,
     evidence_threshold,
     find_wall_lines,
@@ -824,3 +825,22 @@ def test_no_hidden_wall_is_deduced_from_a_doorway_to_a_wall_seen_through_it() ->
     # the scan did not see, bridged where the two walls meet.
     assert set(bridges(np.zeros(50, dtype=bool))) == {1.0}
     assert bridges(doorway) == []
+
+
+def test_stray_points_high_over_a_walls_line_are_no_doorway_to_see_a_wall_through() -> None:
+    # A nearer wall's line (y = 1) with whole wall on x 0-2 and 4-6; a wall 0.5 m behind it
+    # (y = 0.5) is seen over x 1.5-4.5.
+    cells = np.arange(60)
+    wall = (cells < 20) | (cells >= 40)
+    behind = _line_with_opening(0.5, (cells >= 15) & (cells < 45), np.zeros(60, bool), [[1.5, 4.5]])
+    # Between, a doorway (wall only over it, space seen behind): the far wall is the next
+    # room's, seen through it.
+    doorway = (cells >= 20) & (cells < 40)
+    near = _line_with_opening(1.0, wall, doorway, [[0.0, 2.0], [4.0, 6.0]])
+    assert _seen_through_opening(behind, [near, behind])
+    # Between, nothing but a few stray points high up, a column each: the room steps back
+    # there, and the far wall is its own.
+    strays = np.isin(cells, [22, 25, 28, 31, 34])
+    near = _line_with_opening(1.0, wall, strays, [[0.0, 2.0], [4.0, 6.0]])
+    near = dataclasses.replace(near, seen_through=doorway.copy())
+    assert not _seen_through_opening(behind, [near, behind])
