@@ -966,14 +966,10 @@ def _seen_through_opening(far: WallLine, lines: Sequence[WallLine]) -> bool:
         seen = far_cells[known[far_cells]]
         # An opening is a run of cells, as in _through_openings: single columns seen only
         # high up are stray points over the floor, not a lintel.
-        in_front = np.array(
-            [
-                k
-                for i, j in _runs(_opening(near), 0, _SEEN_OPENING_CELLS)
-                for k in range(max(i, first), min(j, last))
-            ],
-            dtype=np.intp,
-        )
+        opening = np.zeros(len(near.high), dtype=bool)
+        for i, j in _runs(_opening(near), 0, _SEEN_OPENING_CELLS):
+            opening[i:j] = True
+        in_front = np.flatnonzero(opening[first:last]) + first
         if (
             len(seen)
             and np.mean(standing[seen]) >= 0.5
