@@ -888,7 +888,7 @@ def _through_openings(lines: Sequence[WallLine], flat_xy: FloatArray) -> NDArray
     for line in lines:
         if line.virtual or line.lintel is None or line.seen_through is None:
             continue
-        spans = _runs(_opening(line), 0, _SEEN_OPENING_CELLS)
+        spans = _opening_runs(line)
         if not spans:
             continue
         walls = _wall_runs(line)
@@ -923,9 +923,7 @@ def _past_back_wall(
         if not 0.0 < back_depth <= _SEEN_THROUGH_REACH:
             continue
         cells = np.floor((flat_xy[:, line.axis] - back.origin) / back.cell_size).astype(np.int64)
-        standing = np.zeros(len(back.high) + 1, dtype=bool)  # the last: off the line
-        for i, j in _wall_runs(back):
-            standing[i:j] = True
+        standing = _span_mask(_wall_runs(back), len(back.high) + 1)  # the last: off the line
         cells = np.where((cells >= 0) & (cells < len(back.high)), cells, len(back.high))
         past |= (depth > back_depth) & standing[cells]
     return past
@@ -964,11 +962,7 @@ def _seen_through_opening(far: WallLine, lines: Sequence[WallLine]) -> bool:
         standing = maximum_filter1d((near.high | near.lintel).astype(np.uint8), 3) > 0
         known = (near.occupied if near.occupied is not None else near.high) | near.seen_through
         seen = far_cells[known[far_cells]]
-        # An opening is a run of cells, as in _through_openings: single columns seen only
-        # high up are stray points over the floor, not a lintel.
-        opening = np.zeros(len(near.high), dtype=bool)
-        for i, j in _runs(_opening(near), 0, _SEEN_OPENING_CELLS):
-            opening[i:j] = True
+        opening = _span_mask(_opening_runs(near), len(near.high))
         in_front = np.flatnonzero(opening[first:last]) + first
         if (
             len(seen)
@@ -990,6 +984,21 @@ def _opening(line: WallLine) -> NDArray[np.bool_]:
     assert line.lintel is not None and line.seen_through is not None
     opening: NDArray[np.bool_] = line.lintel & ~line.high & line.seen_through
     return opening
+
+
+def _opening_runs(line: WallLine) -> list[tuple[int, int]]:
+    """Spans [i, j) of the line's doors and windows: runs of ``_SEEN_OPENING_CELLS`` or more
+    :func:`_opening` cells without a gap (single columns seen only high up are stray points
+    over the floor, not a lintel). The line has ``lintel`` and ``seen_through``."""
+    return _runs(_opening(line), 0, _SEEN_OPENING_CELLS)
+
+
+def _span_mask(spans: Sequence[tuple[int, int]], n_cells: int) -> NDArray[np.bool_]:
+    """(n_cells,) True inside the spans [i, j)."""
+    mask = np.zeros(n_cells, dtype=bool)
+    for i, j in spans:
+        mask[i:j] = True
+    return mask
 
 
 def _wall_runs(line: WallLine) -> list[tuple[int, int]]:

@@ -13,6 +13,7 @@ import itertools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,6 +46,7 @@ _QUARTER_Y = np.array([[0.0, 1.0], [1.0, 0.0], [0.0, -1.0], [-1.0, 0.0]])
 # frame_yaw_fit: how far from fit_frame's yaw it looks (radians), and how finely.
 _YAW_SPAN = math.radians(15.0)
 _YAW_STEP = math.radians(0.25)
+_Angle = TypeVar("_Angle", float, FloatArray)
 _OUTLIER_MISFIT = 11.34  # squared Mahalanobis distance: chi-square 99 % with 3 dof (x, y, yaw)
 
 
@@ -109,9 +111,10 @@ def piece_prior(layout: LocalLayout, prior: FragmentPrior) -> PiecePrior:
     return PiecePrior(yaw, source, prior.sigma_xy, yaw_sigma, lever)
 
 
-def wrap_angle(angle: float) -> float:
-    """Angle wrapped to [-pi, pi)."""
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+def wrap_angle(angle: _Angle) -> _Angle:
+    """Angle (or array of angles) wrapped to [-pi, pi)."""
+    wrapped: _Angle = (angle + math.pi) % (2.0 * math.pi) - math.pi
+    return wrapped
 
 
 def robust_cost(squared: float) -> float:
@@ -195,7 +198,7 @@ def frame_yaw_fit(
     grid = near + _YAW_STEP * np.arange(-steps, steps + 1)  # (G,)
     turned = np.array([priors[i].yaw - rotations[i] * math.pi / 2 for i in ids])  # (k,)
     yaw_sigma = np.array([priors[i].sigma_yaw for i in ids])
-    residual = (turned[None, :] - grid[:, None] + math.pi) % (2.0 * math.pi) - math.pi
+    residual = wrap_angle(turned[None, :] - grid[:, None])
     yaw_cost = _robust_costs((residual / yaw_sigma) ** 2)
     placed = np.array([sources[i] for i in ids])  # (k, 2)
     cos, sin = np.cos(grid)[:, None], np.sin(grid)[:, None]
