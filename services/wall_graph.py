@@ -37,6 +37,8 @@ _ON_SEGMENT = 0.01  # m, a node this close to an edge's segment lies on it
 _LOW_WALL_SHARE = 0.5  # how much a cell with wall points but not the wall's full height covers
 _UNKNOWN_COST = 0.5  # what a cell showing neither wall nor space behind it costs a chain
 _MOUTH_STANDING = 0.5  # share of an opening's mouth where the wall stands (whole or lintel)
+_FRONT_DEPTH = 1.05  # m, deepest furniture (a sofa) a frame's cheapest chain may run along
+_STANDING_OVER = 0.5  # share of a front's stretch the wall behind it shows over
 
 
 @dataclass(frozen=True)
@@ -472,7 +474,7 @@ def find_wall_chain(
     corner_price = params.frame.corner_price if views else _CORNER_METERS
     if found is not None:
         best = _best_path(we, cover, unseen, node_points, corner_price)
-        found = _closer_to_the_walls(found, best, cover, node_points)
+        found = _closer_to_the_walls(found, best, cover, node_points, lines)
     if found is None and params.source_target == "spanning_forest":
         found = _forest_path(we, st)
     elif found is None:
@@ -602,30 +604,82 @@ def _closer_to_the_walls(
     best: tuple[list[int], float] | None,
     cover: FloatArray,
     points: FloatArray,
+    lines: Sequence[WallLine],
 ) -> tuple[list[int], float]:
     """A frame's chain: the frustum's widest pair joined by the cheapest path, unless the
     path explaining the most wall covers ``_FOLLOW_MARGIN`` more and runs along a wall of
     the frustum's path (the same chain, following a recess or step the cheap path cuts
-    across; without a shared wall it may be another room seen through a door)."""
+    across), or behind a wall of it that stands seen over it (the cheap path ran along a
+    wardrobe's front, see :func:`_fronts_of`). Without either it may be another room seen
+    through a door."""
     if best is None:
         return frustum
 
     def covered(path: list[int]) -> float:
         return float(sum(cover[a, b] for a, b in itertools.pairwise(path)))
 
-    def walls(path: list[int]) -> set[tuple[int, int]]:
-        step = np.abs(np.diff(points[path], axis=0))
-        axis = (step[:, 1] > step[:, 0]).astype(np.int64)  # 0: the wall runs along x
-        offset = points[path[:-1]][np.arange(len(axis)), 1 - axis]
-        keys = np.rint(offset / _END_MATCH).astype(int)
-        return set(zip(axis.tolist(), keys.tolist(), strict=True))
-
-    if (
-        walls(best[0]) & walls(frustum[0])
-        and covered(best[0]) > covered(frustum[0]) + _FOLLOW_MARGIN
+    ahead = covered(best[0]) > covered(frustum[0]) + _FOLLOW_MARGIN
+    if ahead and (
+        _path_walls(best[0], points) & _path_walls(frustum[0], points)
+        or _fronts_of(frustum[0], best[0], points, lines)
     ):
         return best
     return frustum
+
+
+def _path_walls(path: list[int], points: FloatArray) -> set[tuple[int, int]]:
+    """The walls a path runs along, as (axis, offset key): axis 0 for a wall along x, the
+    offset rounded to ``_END_MATCH``."""
+    return {(e.axis, int(np.rint(e.offset / _END_MATCH))) for e in _path_edges(path, points)}
+
+
+@dataclass(frozen=True)
+class _Edge:
+    """A path's edge on its wall: axis (0 along x), travel (+1 or -1 along it), the wall's
+    offset and the run coordinates of the edge's ends, in path order."""
+
+    axis: int
+    travel: int
+    offset: float
+    ends: tuple[float, float]
+
+
+def _path_edges(path: list[int], points: FloatArray) -> list[_Edge]:
+    """A path's edges on their walls, in path order."""
+    edges = []
+    for a, b in itertools.pairwise(path):
+        axis = _axis_of(points[b] - points[a])
+        ends = float(points[a, axis]), float(points[b, axis])
+        travel = 1 if ends[1] > ends[0] else -1
+        edges.append(_Edge(axis, travel, float(points[a, 1 - axis]), ends))
+    return edges
+
+
+def _fronts_of(
+    front: list[int], back: list[int], points: FloatArray, lines: Sequence[WallLine]
+) -> bool:
+    """Whether a wall of path ``front`` stands before a wall of path ``back`` (parallel,
+    the same way round, up to ``_FRONT_DEPTH`` nearer the room's inside), and the wall
+    behind shows over most of the front's stretch, whole or seen only high up: the camera
+    saw the room's wall over a wardrobe or a sofa, which a wall of the room would hide (a
+    wall seen through a door shows nowhere over the door's wall)."""
+    backs = _path_edges(back, points)
+    for edge in _path_edges(front, points):
+        inward = edge.travel if edge.axis == 0 else -edge.travel  # the room's side, across
+        for other in backs:
+            depth = (edge.offset - other.offset) * inward
+            if (other.axis, other.travel) != (edge.axis, edge.travel) or not (
+                _END_MATCH < depth <= _FRONT_DEPTH
+            ):
+                continue
+            if any(
+                line.standing_share(*edge.ends) >= _STANDING_OVER
+                for line in lines
+                if (line.axis, line.travel) == (edge.axis, edge.travel)
+                and abs(line.offset - other.offset) < _END_MATCH
+            ):
+                return True
+    return False
 
 
 def _ends_along_high_wall(points: FloatArray, lines: Sequence[WallLine]) -> FloatArray:

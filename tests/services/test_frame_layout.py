@@ -283,6 +283,34 @@ def test_a_deep_arm_whose_near_side_the_camera_cannot_see_is_followed(yaw: float
 
 
 @pytest.mark.parametrize(
+    ("position", "yaw", "pitch"),
+    [
+        ((2.3, 3.2, 1.4), -71.0, -6.0),
+        ((2.3, 3.2, 1.45), -72.0, -5.8),
+        ((2.2, 3.0, 1.4), -70.0, -5.0),
+        ((2.4, 3.3, 1.35), -73.0, -5.0),
+    ],
+)
+def test_the_wall_seen_over_a_sofa_runs_on_behind_the_wardrobe_beside_it(
+    position: tuple[float, float, float], yaw: float, pitch: float
+) -> None:
+    # Against the wall y = 0 stand a wardrobe (x 1.67-3.06, front y = 0.64, 2.06 m high)
+    # and a sofa (x 3.21-5.27, 1 m deep, 0.83 m high). The camera sees the wardrobe's front
+    # up to its top and, over the sofa and over the wardrobe, the wall behind both up to the
+    # ceiling. The cheapest path between the view's widest pair ran along the wardrobe's
+    # front out to the corner; the wall seen over both is the room's, and the chain runs
+    # along it to the corner with x = 5.34.
+    room = Room.from_polygon(np.array([[0.0, 0], [5.34, 0], [5.34, 5.42], [0, 5.42]]), 2.81)
+    boxes = (
+        Box(np.array([1.67, 0.02, 0.0]), np.array([3.06, 0.64, 2.06]), ((2, 0), (1, 0))),
+        Box(np.array([3.21, 0.03, 0.0]), np.array([5.27, 1.02, 0.83]), ((2, 0), (1, 0))),
+    )
+    world = _world_chain(room, Furnishing(boxes=boxes), (position, yaw, pitch))
+    np.testing.assert_allclose(world[:2, 1], 0.0, atol=0.05)
+    np.testing.assert_allclose(world[1], [5.34, 0.0], atol=0.08)
+
+
+@pytest.mark.parametrize(
     ("x", "y", "yaw", "pitch"), [(3.05, 2.7, 18.0, -8.0), (3.0, 2.6, 20.0, -5.0)]
 )
 def test_the_wall_seen_just_past_a_wardrobes_end_is_the_frames_wall(
