@@ -540,10 +540,7 @@ def _wall_stands(
     travel = 1 if direction[axis] > 0 else -1
     return any(
         line.standing_share(a, b) >= _MOUTH_STANDING
-        for line in lines
-        if line.axis == axis
-        and line.travel == travel
-        and abs(line.offset - through[1 - axis]) < _END_MATCH
+        for line in _lines_on(lines, axis, travel, float(through[1 - axis]))
     )
 
 
@@ -674,12 +671,20 @@ def _fronts_of(
                 continue
             if any(
                 line.standing_share(*edge.ends) >= _STANDING_OVER
-                for line in lines
-                if (line.axis, line.travel) == (edge.axis, edge.travel)
-                and abs(line.offset - other.offset) < _END_MATCH
+                for line in _lines_on(lines, edge.axis, edge.travel, other.offset)
             ):
                 return True
     return False
+
+
+def _lines_on(lines: Sequence[WallLine], axis: int, travel: int, offset: float) -> list[WallLine]:
+    """The candidate lines a chain's wall (axis, direction of travel, offset) runs on,
+    within ``_END_MATCH``."""
+    return [
+        line
+        for line in lines
+        if line.axis == axis and line.travel == travel and abs(line.offset - offset) < _END_MATCH
+    ]
 
 
 def _ends_along_high_wall(points: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
@@ -700,10 +705,7 @@ def _ends_along_high_wall(points: FloatArray, lines: Sequence[WallLine]) -> Floa
         reach = max(
             (
                 line.high_wall_beyond(float(out[end, axis]), outward)
-                for line in lines
-                if line.axis == axis
-                and line.travel == travel
-                and abs(line.offset - out[end, 1 - axis]) < _END_MATCH
+                for line in _lines_on(lines, axis, travel, float(out[end, 1 - axis]))
             ),
             default=0.0,
         )
