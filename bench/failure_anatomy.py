@@ -106,7 +106,7 @@ def anatomy_of(
     if len(usable) < scene.n_fragments or not _chains_right_in_plan(result, scene.truth):
         return _with(base, "layout")
     layouts = {fid: lay.snapped() for fid, lay in scene.layouts.items()}
-    by_id, site_hints = site_pieces(layouts, usable, hints)
+    by_id, site_hints = site_pieces(layouts, usable, hints, params.placement)
     pieces = list(by_id.values())
     order, rotations = true_assembly(scene.truth, layouts, list(by_id))
     truth = evaluate_placement(pieces, order, rotations, params.placement, site_hints)

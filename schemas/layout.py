@@ -17,8 +17,9 @@ Evidence = Literal["cloud", "thin_cloud", "frame"]  # what a local layout rests 
 class LocalLayoutWire(BaseModel):
     """A :class:`services.types.LocalLayout` as versioned JSON.
 
-    Boundary points, the footprint, the unchained walls and the cameras are base64
-    little-endian float64 arrays ((M, 3), (F, 2), (W, 2) and (C, 2)) in the aligned frame.
+    Boundary points, the footprint, the unchained walls, the cameras and the view ranges are
+    base64 little-endian float64 arrays ((M, 3), (F, 2), (W, 2), (C, 2) and (B, 2)) in the
+    aligned frame.
     """
 
     model_config = ConfigDict(frozen=True)
@@ -55,4 +56,10 @@ class LocalLayoutWire(BaseModel):
         description="RGB-D frames: (C, 2) base64 aligned-frame positions of the cameras' "
         "optical centres, one per merged frame; null for point clouds and for layouts "
         "stored before cameras were kept",
+    )
+    view_ranges: str | None = Field(
+        None,
+        description="RGB-D single frames: (B, 2) base64 per half degree of azimuth around the "
+        "camera (aligned frame, radians) the horizontal distance of the walls seen, m; null "
+        "for point clouds, merged frames and layouts stored before view ranges were kept",
     )

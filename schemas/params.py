@@ -196,6 +196,27 @@ class PlacementParams(_Frozen):
         description="RGB-D frames: the scale of the stations term: a camera this far from "
         "the nearest other piece's costs 0.5, m",
     )
+    station_view_overlap: float = Field(
+        8.0,
+        ge=0,
+        description="RGB-D frames: the least arc, degrees, over which two frames' views must "
+        "overlap for their wall ranges to say they share a camera (services.view_ranges); a "
+        "shared camera is then joined in every assembly that turns the two frames as the "
+        "ranges do; 0 turns it off",
+    )
+    station_view_share: float = Field(
+        0.9,
+        gt=0,
+        le=1,
+        description="RGB-D frames: the share of that arc where the two frames' wall ranges "
+        "must agree",
+    )
+    station_view_tolerance: float = Field(
+        0.05,
+        gt=0,
+        description="RGB-D frames: how far two frames' wall ranges may differ in one "
+        "direction and still agree, m (plus 1 % of the range)",
+    )
     station_outlier: float = Field(
         0.25,
         gt=0,

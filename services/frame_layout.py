@@ -37,6 +37,7 @@ from services.manhattan import (
 )
 from services.rgbd import OPTICAL_TO_LEVEL, RgbdFrame, backproject
 from services.types import FloatArray, LocalLayout, ManhattanFrame, ProgressFn
+from services.view_ranges import view_ranges
 from services.wall_graph import find_wall_chain
 from services.wall_lines import (
     MAX_DOORWAY,
@@ -714,6 +715,12 @@ def estimate_frame_layout(
     across = view_angle(views)
     top = _view_top(cameras, frame.rotation)
     centres = np.array([view.centre[:2] for view in views], dtype=np.float64)
+    # Merged frames have no one point their ranges are seen from.
+    ranges = (
+        view_ranges(aligned, centres[0], frame.floor_z, frame.ceiling_z)
+        if len(views) == 1
+        else np.zeros((0, 2))
+    )
     if chain is None or len(chain.keypoints) < 2:
         report("done", 1.0)
         return LocalLayout(
@@ -724,6 +731,7 @@ def estimate_frame_layout(
             view_angle=across,
             view_top=top,
             cameras=centres,
+            view_ranges=ranges,
         )
     kp = _to_frustum_edges(_without_furniture(chain.keypoints, lines), lines, views)
     # An end wall's length is known once it reaches the view's edge.
@@ -743,6 +751,7 @@ def estimate_frame_layout(
         view_angle=across,
         view_top=top,
         cameras=centres,
+        view_ranges=ranges,
     )
 
 

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from schemas.hints import HintsModel
-from schemas.params import PipelineParams
+from schemas.params import PipelineParams, PlacementParams
 from schemas.result import (
     AlternativeFragmentModel,
     AlternativeModel,
@@ -65,6 +65,7 @@ from services.registration import premerge
 from services.rgbd import RgbdFrame
 from services.stations import with_station_cost
 from services.types import FloatArray, LocalLayout, ParsedFragment, ProgressFn
+from services.view_ranges import station_mates
 from services.wall_evidence import unexplained_walls
 
 __all__ = [
@@ -129,16 +130,27 @@ class _Placed:
 
 
 def site_pieces(
-    layouts: Mapping[str, LocalLayout], usable: Sequence[str], hints: HintsModel | None
+    layouts: Mapping[str, LocalLayout],
+    usable: Sequence[str],
+    hints: HintsModel | None,
+    params: PlacementParams = PlacementParams(),
 ) -> tuple[dict[str, Piece], SiteHints]:
     """The pieces of fragments ``usable`` as the search takes them, the fixed first one
-    first (:func:`_root_first`), and the hints resolved to them. ``layouts`` snapped
-    (:meth:`LocalLayout.snapped`), as :func:`place_site` places them."""
+    first (:func:`_root_first`), each with the frames that share its camera, and the hints
+    resolved to them. ``layouts`` snapped (:meth:`LocalLayout.snapped`), as
+    :func:`place_site` places them."""
     site_hints = _site_hints(layouts, usable, hints)
     # The search starts from the smallest id, not the first upload: the same fragments give
     # the same answer (and site frame) whatever order they arrived in.
     first = _root_first(sorted(usable), site_hints)
-    return {fid: make_piece(fid, layouts[fid]) for fid in first}, site_hints
+    mates = station_mates({fid: layouts[fid] for fid in first}, params)
+    pieces = {
+        fid: dataclasses.replace(
+            make_piece(fid, layouts[fid]), station_mates=tuple(sorted(mates[fid].items()))
+        )
+        for fid in first
+    }
+    return pieces, site_hints
 
 
 def _site_hints(
@@ -635,7 +647,7 @@ def place_site(
         for fid, lay in layouts.items()
     }
     usable = [fid for fid, lay in layouts.items() if lay.ok]
-    pieces, site_hints = site_pieces(layouts, usable, hints)
+    pieces, site_hints = site_pieces(layouts, usable, hints, params.placement)
     report("placement", 0.1)
     placement = place_pieces(list(pieces.values()), params.placement, site_hints)
     if placement is not None:

@@ -351,8 +351,9 @@ def _with_stations(
     params: PlacementParams,
 ) -> Refinement:
     """The refinement solved again with the cameras of one station made to coincide: the
-    pairs ``refined`` puts within reach (:func:`_stations`; only those: taking in pairs a
-    first solve brings together chained distinct stations of one room into one), less any
+    pairs ``refined`` puts within reach and those whose views share a camera
+    (:func:`_stations`; no others: taking in pairs a first solve brings together chained
+    distinct stations of one room into one), less any
     the solution still leaves apart, as long as it solves as the loop did without;
     ``refined`` itself when none is left."""
     if refined.status.startswith("fallback"):
@@ -372,12 +373,17 @@ def _with_stations(
 def _stations(
     pieces: Sequence[Piece], rotations: Sequence[int], translations: FloatArray, reach: float
 ) -> list[_Station]:
-    """Pairs of pieces whose nearest cameras stand within ``reach`` of each other with the
-    pieces' sources at ``translations`` (loop order): taken for one station."""
+    """Pairs of pieces taken for one station (loop order): those whose nearest cameras
+    stand within ``reach`` of each other with the pieces' sources at ``translations``, and
+    those whose views say they share their camera (``Piece.station_mates``) when the
+    assembly turns them as their views do, however far apart the loop put them."""
     cameras = placed_cameras(pieces, rotations, np.zeros((len(pieces), 2)))
     out = []
     for i, k in itertools.combinations(range(len(pieces)), 2):
         if not (len(cameras[i]) and len(cameras[k])):
+            continue
+        if dict(pieces[i].station_mates).get(pieces[k].id) == (rotations[k] - rotations[i]) % 4:
+            out.append(_Station(i, cameras[i][0], k, cameras[k][0]))  # single frames
             continue
         first = cameras[i] + translations[i]
         second = cameras[k] + translations[k]

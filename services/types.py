@@ -124,6 +124,10 @@ class LocalLayout:
     stands (one per merged frame; empty for clouds). Frames taken from one station (a robot
     turning on the spot, a camera on a tripod) share it, which pins how far apart the
     placement may put their walls.
+    view_ranges: (B, 2) float64: single frames only, per half degree of azimuth around the
+    camera (aligned frame, radians), how far the walls seen there stand, m
+    (:func:`services.view_ranges.view_ranges`; empty for clouds and merged frames). Two
+    frames whose ranges agree once turned share their camera.
     """
 
     keypoints: FloatArray
@@ -136,6 +140,7 @@ class LocalLayout:
     view_angle: float | None = None
     view_top: float | None = None
     cameras: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    view_ranges: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
 
     @property
     def ok(self) -> bool:
@@ -160,6 +165,7 @@ class LocalLayout:
             view_angle=_snap_scalar(self.view_angle, _UNIT_DECIMALS),
             view_top=_snap_scalar(self.view_top, _UNIT_DECIMALS),
             cameras=_snap(self.cameras),
+            view_ranges=_snap(self.view_ranges),
         )
 
     def keypoints_local(self) -> FloatArray:

@@ -43,13 +43,14 @@ def layout_to_wire(layout: LocalLayout) -> LocalLayoutWire:
         view_angle=layout.view_angle,
         view_top=layout.view_top,
         cameras=encode_array(layout.cameras) if len(layout.cameras) else None,
+        view_ranges=encode_array(layout.view_ranges) if len(layout.view_ranges) else None,
     )
 
 
 def layout_from_wire(wire: LocalLayoutWire) -> LocalLayout:
     """Inverse of :func:`layout_to_wire`: (K, 2) keypoints, (M, 3) boundaries, (F, 2)
-    footprint, (W, 2) unchained walls, (C, 2) cameras (none for a layout stored without),
-    all float64 in the aligned frame."""
+    footprint, (W, 2) unchained walls, (C, 2) cameras and (B, 2) view ranges (none for a
+    layout stored without), all float64 in the aligned frame."""
     frame = ManhattanFrame(
         rotation=np.asarray(wire.rotation, dtype=np.float64),
         floor_z=wire.floor_z,
@@ -66,4 +67,5 @@ def layout_from_wire(wire: LocalLayoutWire) -> LocalLayout:
         view_angle=wire.view_angle,
         view_top=wire.view_top,
         cameras=decode_array(wire.cameras or "", 2),
+        view_ranges=decode_array(wire.view_ranges or "", 2),
     )

@@ -182,6 +182,9 @@ class Piece:
     view_top: frames only, how high the top of the view reaches (see LocalLayout).
     cameras: (C, 2) float64, frames only: the cameras' optical centres relative to the
     source (empty for clouds; see LocalLayout).
+    station_mates: frames only: (id, r) for each other piece whose frame shares this one's
+    camera, r the quarter turns taking its aligned frame onto this one's
+    (:func:`services.view_ranges.station_mates`).
     """
 
     id: str
@@ -196,6 +199,7 @@ class Piece:
     view_angle: float | None = None
     view_top: float | None = None
     cameras: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    station_mates: tuple[tuple[str, int], ...] = ()
 
     @cached_property
     def turning(self) -> int:

@@ -110,12 +110,17 @@ def test_frame_rooms_are_one_set_bucketed_by_frames(capsys: pytest.CaptureFixtur
 
 def test_the_true_assembly_at_the_wrong_size_is_geometry_not_energy() -> None:
     # Kinect room 2009, refined expecting no overlap at the junctions (as before
-    # refined_junction_mean; the default now gets its size right): the main room is the
-    # true loop, 10 % of the diagonal off in size; the truth's energy evaluated again
-    # differs from the result's by float noise (2e-6).
+    # refined_junction_mean) and without the cameras its frames' views say they share
+    # (either gets its size right): the main room is the true loop, 10 % of the diagonal
+    # off in size; the truth's energy evaluated again differs from the result's by float
+    # noise (2e-6).
     scene = frame_scenes("kinect", 1, 2009, False, PipelineParams())[0]
-    end_to_end = PipelineParams(placement=PlacementParams(refined_junction_mean=0.0))
     assert anatomy_of(scene, PipelineParams()).right
+    overlap_unseen = PlacementParams(refined_junction_mean=0.0)
+    assert anatomy_of(scene, PipelineParams(placement=overlap_unseen)).right
+    end_to_end = PipelineParams(
+        placement=overlap_unseen.model_copy(update={"station_view_overlap": 0.0})
+    )
     anatomy = anatomy_of(scene, end_to_end)
     assert not anatomy.right
     assert anatomy.cause == "geometry"

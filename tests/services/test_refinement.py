@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import numpy as np
 import pytest
@@ -217,9 +218,11 @@ _WALLS = (
 )
 
 
-def _frames_around(camera: tuple[float, float] = (3.0, 2.0)) -> list[Piece]:
+def _frames_around(
+    camera: tuple[float, float] = (3.0, 2.0), walls: tuple[Any, ...] = _WALLS
+) -> list[Piece]:
     pieces = []
-    for k, (source, target) in enumerate(_WALLS):
+    for k, (source, target) in enumerate(walls):
         chain = np.array([source, target]) - np.array(source)
         offset = np.array([camera]) - np.array(source)
         pieces.append(dataclasses.replace(bare_piece(f"f{k}", chain), cameras=offset))
@@ -283,3 +286,29 @@ def test_a_station_the_walls_keep_apart_is_dropped():
     assert {(1, 2), (1, 3), (1, 4), (2, 3)} <= set(refined.stations)
     walls = _sites(pieces, [0] * 5, refined.translations)
     assert walls[0][0][1] == pytest.approx(walls[1][0][1], abs=0.11)  # still one line
+
+
+def test_frames_whose_views_share_a_camera_are_one_station_however_far_apart_the_loop_puts_them():
+    # The same room's walls seen 1 m short at both ends: joined end to end, neighbouring
+    # cameras stand 1.4 m apart, out of reach. Frames whose views say they share the camera
+    # (station_mates, with the turn the assembly gives them) are one station all the same,
+    # and the room is the 6 x 4 m one; told another turn, they are not taken.
+    walls = (((1.0, 0.0), (5.0, 0.0)), ((6.0, 1.0), (6.0, 3.0)), ((5.0, 4.0), (1.0, 4.0)),
+             ((0.0, 3.0), (0.0, 1.0)))  # fmt: skip
+    pieces = _frames_around(walls=walls)
+    start = _end_to_end(pieces)
+    assert refine_translations(pieces, [0] * 4, start).stations == ()
+
+    def told(turn: int) -> list[Piece]:
+        return [
+            dataclasses.replace(p, station_mates=tuple((q.id, turn) for q in pieces if q is not p))
+            for p in pieces
+        ]
+
+    joined = refine_translations(told(0), [0] * 4, start)
+    assert joined.status == "solved"
+    assert sorted(joined.stations) == [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+    sources = joined.translations - joined.translations[0]
+    truth = np.array([source for source, _ in walls]) - np.array(walls[0][0])
+    assert sources == pytest.approx(truth, abs=0.05)
+    assert refine_translations(told(1), [0] * 4, start).stations == ()

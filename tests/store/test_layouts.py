@@ -82,3 +82,20 @@ def test_a_frames_cameras_survive_the_wire():
     assert layout_from_wire(LocalLayoutWire.model_validate(old)).cameras.shape == (0, 2)
     cloud = scene_layouts()[small_scene("easy", 0).fragments[0].id]
     assert layout_to_wire(cloud).cameras is None
+
+
+def test_a_frames_view_ranges_survive_the_wire():
+    ranges = np.array([[-1.2, 3.4], [-1.19, 3.41]])
+    layout = dataclasses.replace(
+        scene_layouts()[small_scene("easy", 0).fragments[0].id],
+        evidence="frame",
+        view_ranges=ranges,
+    )
+    wire = layout_to_wire(layout)
+    back = layout_from_wire(LocalLayoutWire.model_validate_json(wire.model_dump_json()))
+    assert np.array_equal(back.view_ranges, ranges)
+    old = wire.model_dump(mode="json")
+    del old["view_ranges"]  # stored before the field existed: no station told from the view
+    assert layout_from_wire(LocalLayoutWire.model_validate(old)).view_ranges.shape == (0, 2)
+    cloud = scene_layouts()[small_scene("easy", 0).fragments[0].id]
+    assert layout_to_wire(cloud).view_ranges is None

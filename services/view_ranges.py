@@ -1,0 +1,125 @@
+"""Frames turned on the spot: telling from two frames' views that they share their camera.
+
+A robot turning on the spot, or a camera on a tripod, takes frames whose views often overlap.
+Plain walls give ORB nothing to match (:mod:`services.frame_merge`), yet the overlap still
+says something: seen from one point, the same direction meets the same wall at the same
+distance. Each single frame keeps its *view ranges*: per half degree of azimuth around its
+camera (aligned frame), how far away horizontally the walls stand (:func:`view_ranges`; the
+floor and ceiling are left out, since they look alike from anywhere at one height). Two
+frames share a station (:func:`shared_turn`) when one quarter turn of the second (give or
+take the few degrees a Manhattan frame may be off) puts its ranges onto the first's over an
+arc of ``station_view_overlap`` degrees at least, and they agree there almost everywhere
+(``station_view_share``, within ``station_view_tolerance`` plus 1 % of the distance).
+
+On the outside frame rooms (``bench.outside``, seed 7, 592 frame pairs) every pair that
+passed with the turn it found and the truth's relative turn agreeing shared a station. A
+room symmetric about a point does pass pairs of two stations, turned by a half: so a pair is
+only a station for an assembly that turns its two pieces the same way
+(:func:`services.refinement.refine_translations`), and never a merge.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from schemas.params import PlacementParams
+from services.types import FloatArray, LocalLayout
+
+__all__ = ["BIN", "shared_turn", "station_mates", "view_ranges"]
+
+BIN = math.radians(0.5)  # azimuth bin of the view ranges, radians
+_BINS = round(2.0 * math.pi / BIN)
+_OVER_FLOOR = 0.3  # m: points this near the floor (its clutter too) are left out
+_UNDER_CEILING = 0.15  # m: and this near the ceiling
+_MIN_POINTS = 5  # points a bin needs for a range
+_FAR_SHARE = 0.8  # a bin's range: this quantile of its distances (the wall behind low clutter)
+_YAW_SLACK = 6  # bins (3 degrees) a turn may be off: two frames' Manhattan frames differ so
+
+
+def view_ranges(
+    aligned: FloatArray, centre: FloatArray, floor_z: float, ceiling_z: float | None
+) -> FloatArray:
+    """(B, 2) per azimuth bin with enough wall points: the bin's centre (radians, in
+    [-pi, pi)) and its horizontal range from ``centre`` (m).
+
+    aligned: (N, 3) a frame's points in its aligned frame; centre: (2,) its camera there.
+
+    >>> pts = np.array([[2.0, 0.001 * i, 0.5 + 0.01 * i] for i in range(40)])
+    >>> view_ranges(pts, np.zeros(2), 0.0, 2.5).round(3).tolist()
+    [[0.004, 2.0], [0.013, 2.0], [0.022, 2.0]]
+    """
+    up = aligned[:, 2]
+    keep = up > floor_z + _OVER_FLOOR
+    if ceiling_z is not None:
+        keep &= up < ceiling_z - _UNDER_CEILING
+    offset = aligned[keep, :2] - centre
+    if len(offset) == 0:
+        return np.zeros((0, 2))
+    azimuth = np.arctan2(offset[:, 1], offset[:, 0])
+    distance = np.hypot(offset[:, 0], offset[:, 1])
+    bins = np.minimum(np.floor((azimuth + math.pi) / BIN).astype(np.int64), _BINS - 1)
+    order = np.lexsort((distance, bins))
+    bins, distance = bins[order], distance[order]
+    labels, start, count = np.unique(bins, return_index=True, return_counts=True)
+    full = count >= _MIN_POINTS
+    pick = start[full] + np.floor(_FAR_SHARE * (count[full] - 1)).astype(np.int64)
+    centres = (labels[full] + 0.5) * BIN - math.pi
+    return np.column_stack([centres, distance[pick]]).astype(np.float64)
+
+
+def _dense(ranges: FloatArray) -> FloatArray:
+    """(_BINS,) the ranges on the full circle, NaN where the view saw no wall."""
+    out = np.full(_BINS, np.nan)
+    index = np.floor((ranges[:, 0] + math.pi) / BIN).astype(np.int64) % _BINS
+    out[index] = ranges[:, 1]
+    return out
+
+
+def shared_turn(
+    first: FloatArray, second: FloatArray, params: PlacementParams = PlacementParams()
+) -> int | None:
+    """The quarter turns r (0-3) taking the second frame's aligned frame onto the first's
+    (``aligned_first = rot90(r) @ aligned_second``) when their view ranges say the two
+    frames share a camera; None when they overlap too little or disagree, or when two turns
+    pass (a view that looks alike turned).
+
+    first, second: (B, 2) :func:`view_ranges` of two frames.
+    """
+    if len(first) == 0 or len(second) == 0:
+        return None
+    tolerance = params.station_view_tolerance
+    a, b = _dense(first), _dense(second)
+    turns = np.repeat(np.arange(4), 2 * _YAW_SLACK + 1)
+    shifts = turns * (_BINS // 4) + np.tile(np.arange(-_YAW_SLACK, _YAW_SLACK + 1), 4)
+    # Row s: the second's ranges turned by shifts[s] bins (np.roll of each shift at once).
+    turned = b[(np.arange(_BINS)[None, :] - shifts[:, None]) % _BINS]
+    both = ~np.isnan(a)[None, :] & ~np.isnan(turned)
+    near = np.where(both, a[None, :], 0.0)
+    agree = both & (np.abs(near - np.where(both, turned, 0.0)) <= tolerance + 0.01 * near)
+    overlap = both.sum(axis=1)
+    least = max(1, round(math.radians(params.station_view_overlap) / BIN))
+    share = agree.sum(axis=1) / np.maximum(overlap, 1)
+    passed = set(turns[(overlap >= least) & (share >= params.station_view_share)].tolist())
+    return passed.pop() if len(passed) == 1 else None
+
+
+def station_mates(
+    layouts: Mapping[str, LocalLayout], params: PlacementParams = PlacementParams()
+) -> dict[str, dict[str, int]]:
+    """Per fragment id, the other fragments whose single frame shares its camera, with the
+    quarter turns taking the other's aligned frame onto its own (:func:`shared_turn`);
+    fragments without view ranges (clouds, merged frames) have none."""
+    ids = sorted(fid for fid, lay in layouts.items() if len(lay.view_ranges))
+    mates: dict[str, dict[str, int]] = {fid: {} for fid in layouts}
+    if params.station_view_overlap == 0.0:
+        return mates
+    for i, first in enumerate(ids):
+        for second in ids[i + 1 :]:
+            turn = shared_turn(layouts[first].view_ranges, layouts[second].view_ranges, params)
+            if turn is not None:
+                mates[first][second] = turn
+                mates[second][first] = (-turn) % 4
+    return mates
