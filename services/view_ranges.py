@@ -11,11 +11,12 @@ take the few degrees a Manhattan frame may be off) puts its ranges onto the firs
 arc of ``station_view_overlap`` degrees at least, and they agree there almost everywhere
 (``station_view_share``, within ``station_view_tolerance`` plus 1 % of the distance).
 
-On the outside frame rooms (``bench.outside``, seed 7, 592 frame pairs) every pair that
-passed with the turn it found and the truth's relative turn agreeing shared a station. A
-room symmetric about a point does pass pairs of two stations, turned by a half: so a pair is
-only a station for an assembly that turns its two pieces the same way
-(:func:`services.refinement.refine_translations`), and never a merge.
+On the outside frame rooms (``bench.outside``, seeds 7 and 8) 112 of the 131 pairs that
+passed share a station and the truth's turn; 18 found another turn (a room that looks alike
+turned, as from the middle of a rectangle) and 1 was two stations whose views look alike.
+So a pair is only a station for an assembly that turns its two pieces as the pair says
+(:func:`services.refinement.refine_translations`, where the walls may still refuse it), and
+never a merge.
 """
 
 from __future__ import annotations
