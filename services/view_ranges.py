@@ -21,6 +21,7 @@ never a merge.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping
 
@@ -29,7 +30,7 @@ import numpy as np
 from schemas.params import PlacementParams
 from services.types import FloatArray, LocalLayout
 
-__all__ = ["BIN", "shared_turn", "station_mates", "view_ranges"]
+__all__ = ["BIN", "shared_turn", "station_mates", "view_ranges", "without_odd_triangles"]
 
 BIN = math.radians(0.5)  # azimuth bin of the view ranges, radians
 _BINS = round(2.0 * math.pi / BIN)
@@ -111,7 +112,8 @@ def station_mates(
     layouts: Mapping[str, LocalLayout], params: PlacementParams = PlacementParams()
 ) -> dict[str, dict[str, int]]:
     """Per fragment id, the other fragments whose single frame shares its camera, with the
-    quarter turns taking the other's aligned frame onto its own (:func:`shared_turn`);
+    quarter turns taking the other's aligned frame onto its own (:func:`shared_turn`), less
+    the pairs of triangles whose turns do not add up (:func:`without_odd_triangles`);
     fragments without view ranges (clouds, merged frames) have none."""
     ids = sorted(fid for fid, lay in layouts.items() if len(lay.view_ranges))
     mates: dict[str, dict[str, int]] = {fid: {} for fid in layouts}
@@ -123,4 +125,28 @@ def station_mates(
             if turn is not None:
                 mates[first][second] = turn
                 mates[second][first] = (-turn) % 4
-    return mates
+    return without_odd_triangles(mates)
+
+
+def without_odd_triangles(mates: Mapping[str, Mapping[str, int]]) -> dict[str, dict[str, int]]:
+    """The pairs of :func:`station_mates` less every pair in a triangle whose turns do not
+    add up: frames of one station turn into each other consistently, so one of the three
+    only looked alike (as from the middle of a rectangle), and none of them is trusted.
+
+    >>> mates = {"a": {"b": 1, "c": 0}, "b": {"a": 3, "c": 0}, "c": {"a": 0, "b": 0}}
+    >>> without_odd_triangles(mates)
+    {'a': {}, 'b': {}, 'c': {}}
+    >>> mates["a"]["c"] = mates["c"]["a"] = 1
+    >>> mates["c"]["a"] = 3
+    >>> without_odd_triangles(mates) == mates
+    True
+    """
+    ids = sorted(mates)
+    odd = {
+        frozenset(pair)
+        for a, b, c in itertools.combinations(ids, 3)
+        if b in mates[a] and c in mates[a] and c in mates[b]
+        and (mates[a][b] + mates[b][c] - mates[a][c]) % 4
+        for pair in ((a, b), (b, c), (a, c))
+    }  # fmt: skip
+    return {a: {b: t for b, t in mates[a].items() if frozenset((a, b)) not in odd} for a in ids}

@@ -12,7 +12,13 @@ from services.frame_layout import estimate_rgbd_layout
 from services.synthetic.furniture import Box, Furnishing
 from services.synthetic.room import Room
 from services.types import LocalLayout
-from services.view_ranges import BIN, shared_turn, station_mates, view_ranges
+from services.view_ranges import (
+    BIN,
+    shared_turn,
+    station_mates,
+    view_ranges,
+    without_odd_triangles,
+)
 from tests.frame_fixtures import render_views
 
 # A 6.4 x 5.1 m room with a notch in one corner and a wardrobe against the wall y = 0.
@@ -92,3 +98,15 @@ def test_ranges_that_overlap_too_little_or_disagree_share_no_camera():
     assert shared_turn(first, off) is None
     assert shared_turn(first[:10], turned[:10]) is None  # 5 degrees: too little overlap
     assert shared_turn(first, np.zeros((0, 2))) is None
+
+
+def test_a_triangle_of_pairs_whose_turns_do_not_add_up_is_not_trusted():
+    # d shares the camera of a and b consistently (a -> b 1, b -> d 2, a -> d 3); c looked
+    # like b turned 0 and like a turned 0, which a -> b 1 contradicts: the triangle a, b, c
+    # is dropped, and with it a -> b, which the triangle a, b, d alone would have kept.
+    turns = {("a", "b"): 1, ("b", "c"): 0, ("a", "c"): 0, ("b", "d"): 2, ("a", "d"): 3}
+    mates: dict[str, dict[str, int]] = {fid: {} for fid in "abcd"}
+    for (first, second), turn in turns.items():
+        mates[first][second], mates[second][first] = turn, (-turn) % 4
+    kept = without_odd_triangles(mates)
+    assert kept == {"a": {"d": 3}, "b": {"d": 2}, "c": {}, "d": {"a": 1, "b": 2}}
