@@ -378,11 +378,12 @@ def _stations(
     those whose views say they share their camera (``Piece.station_mates``) when the
     assembly turns them as their views do, however far apart the loop put them."""
     cameras = placed_cameras(pieces, rotations, np.zeros((len(pieces), 2)))
+    mates = [dict(piece.station_mates) for piece in pieces]
     out = []
     for i, k in itertools.combinations(range(len(pieces)), 2):
         if not (len(cameras[i]) and len(cameras[k])):
             continue
-        if dict(pieces[i].station_mates).get(pieces[k].id) == (rotations[k] - rotations[i]) % 4:
+        if mates[i].get(pieces[k].id) == (rotations[k] - rotations[i]) % 4:
             out.append(_Station(i, cameras[i][0], k, cameras[k][0]))  # single frames
             continue
         first = cameras[i] + translations[i]

@@ -92,8 +92,12 @@ def shared_turn(
     """
     if len(first) == 0 or len(second) == 0:
         return None
+    return _turn_between(_dense(first), _dense(second), params)
+
+
+def _turn_between(a: FloatArray, b: FloatArray, params: PlacementParams) -> int | None:
+    """:func:`shared_turn` of two frames' ranges on the full circle (:func:`_dense`)."""
     tolerance = params.station_view_tolerance
-    a, b = _dense(first), _dense(second)
     turns = np.repeat(np.arange(4), 2 * _YAW_SLACK + 1)
     shifts = turns * (_BINS // 4) + np.tile(np.arange(-_YAW_SLACK, _YAW_SLACK + 1), 4)
     # Row s: the second's ranges turned by shifts[s] bins (np.roll of each shift at once).
@@ -119,9 +123,10 @@ def station_mates(
     mates: dict[str, dict[str, int]] = {fid: {} for fid in layouts}
     if params.station_view_overlap == 0.0:
         return mates
+    dense = {fid: _dense(layouts[fid].view_ranges) for fid in ids}
     for i, first in enumerate(ids):
         for second in ids[i + 1 :]:
-            turn = shared_turn(layouts[first].view_ranges, layouts[second].view_ranges, params)
+            turn = _turn_between(dense[first], dense[second], params)
             if turn is not None:
                 mates[first][second] = turn
                 mates[second][first] = (-turn) % 4

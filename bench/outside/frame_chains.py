@@ -35,7 +35,7 @@ from bench.outside.score import true_fragments
 from cli.frames import read_frame_dir
 from schemas.params import PipelineParams
 from services.fragments import fragment_layout
-from services.geometry import points_in_polygon
+from services.geometry import distance_to_polygon, points_in_polygon
 from services.model_export import to_site
 from services.types import FloatArray
 
@@ -77,11 +77,7 @@ def chain_strays(chain: FloatArray, polygon: FloatArray) -> tuple[float, float]:
     t = np.linspace(0.0, 1.0, _SAMPLES)[None, :, None]
     steps = (chain[1:] - chain[:-1])[:, None, :]
     points = (chain[:-1, None, :] + t * steps).reshape(-1, 2)
-    edges = np.roll(polygon, -1, axis=0) - polygon  # (V, 2) edge i from vertex i
-    relative = points[:, None, :] - polygon[None, :, :]  # (M, V, 2)
-    along = np.clip(np.sum(relative * edges, axis=2) / np.sum(edges**2, axis=1), 0.0, 1.0)
-    off = relative - along[..., None] * edges
-    distance = np.sqrt(np.sum(off**2, axis=2)).min(axis=1)
+    distance = distance_to_polygon(points, polygon)
     inside = points_in_polygon(points, polygon)
     return float(distance[~inside].max(initial=0.0)), float(distance[inside].max(initial=0.0))
 
