@@ -6,7 +6,9 @@ with little or no overlap. Each scene's frames go the way ``jigsaw align`` takes
 (:func:`services.pipeline.align_fragments`): frames that overlap are merged (ORB matches
 verified on the depths), then the local layout of each frame or merged group, then the
 global placement; scored by :func:`services.evaluation.evaluate_result` with the paper's
-thresholds (5 % of the fragment's / room's diagonal). Time per frame is that of each local
+thresholds (5 % of the fragment's / room's diagonal). A merged group's frames all carry
+the group's chain, so each is judged against the stretch of wall the group saw
+(:func:`merged_truth`), not its own. Time per frame is that of each local
 layout (a merged group's counts once), wall clock and process CPU time (all threads; robust
 to a busy machine).
 
@@ -19,6 +21,9 @@ to a busy machine).
 ``kinect`` (the default, 63 degrees across), ``realsense`` (79), ``wide`` (119); repeated, each
 in turn (``--fit`` pools them and also fits the map's change with the view angle,
 ``frame_view_slope``).
+
+``--overlap M`` lets neighbouring frames' stretches of wall overlap by up to M meters (the
+generator's default: 0.3), as a robot turning on the spot takes them.
 
 ``--pitch LOW HIGH`` and ``--roll DEG`` hold the cameras otherwise than the generator does
 (5-20 degrees down, 3 of roll), e.g. ``--pitch -45 -30`` for views over a desk or floor
@@ -81,6 +86,8 @@ from services.synthetic.render import (  # noqa: E402
     frame_ground_truth_json,
     generate_frame_scene,
 )
+from services.synthetic.room import Room  # noqa: E402
+from services.synthetic.scan import Stretch, stretch_keypoints  # noqa: E402
 from services.types import FloatArray  # noqa: E402
 
 
@@ -100,6 +107,51 @@ class LayoutClock:
             self.seconds.append(now[0] - self.started[0])
             self.cpu.append(now[1] - self.started[1])
         self.started = now if stage.startswith("local layout") else None
+
+
+def merged_truth(truth: Mapping[str, Any], result: Mapping[str, Any]) -> dict[str, Any]:
+    """The frames' truth (:func:`~services.synthetic.render.frame_ground_truth_json`) with
+    the frames of every merged group of ``result`` (``merged_into``) given the group's: the
+    stretch of wall from the first of their stretches along the loop to the last (merged
+    frames overlap), seen from each frame, and the largest of their diagonals and the
+    stretch's. Unmerged frames keep their own."""
+    groups: dict[str, list[str]] = {}
+    for entry in result["fragments"]:
+        anchor = entry.get("merged_into")
+        if anchor is not None:
+            groups.setdefault(anchor, [anchor]).append(entry["id"])
+    fragments = {f["id"]: dict(f) for f in truth["fragments"]}
+    room = Room.from_polygon(
+        np.asarray(truth["room"]["polygon"], dtype=np.float64), truth["room"]["ceiling_z"]
+    )
+    perimeter = float(room.arcs[-1])
+    for members in groups.values():
+        arcs = [(fragments[m]["loop_start"], fragments[m]["loop_end"]) for m in members]
+        lengths = [float(np.mod(end - start, perimeter)) for start, end in arcs]
+        # The union starts at the one start no other stretch holds (the first along the loop).
+        first = min(
+            range(len(arcs)),
+            key=lambda i: sum(
+                0.0 < np.mod(arcs[i][0] - start, perimeter) < length
+                for (start, _), length in zip(arcs, lengths, strict=True)
+            ),
+        )
+        start = arcs[first][0]
+        length = max(
+            float(np.mod(other - start, perimeter)) + span
+            for (other, _), span in zip(arcs, lengths, strict=True)
+        )
+        world = stretch_keypoints(room, Stretch(start, min(length, perimeter)))
+        spread = float(np.linalg.norm(np.ptp(world, axis=0)))
+        diagonal = max([spread] + [float(fragments[m]["diagonal"]) for m in members])
+        on_floor = np.column_stack([world, np.zeros(len(world))])
+        for m in members:
+            pose = np.asarray(fragments[m]["pose"], dtype=np.float64)
+            local = (on_floor - pose[:3, 3]) @ pose[:3, :3]
+            fragments[m].update(
+                keypoints_world=world.tolist(), keypoints_local=local.tolist(), diagonal=diagonal
+            )
+    return {**truth, "fragments": [fragments[f["id"]] for f in truth["fragments"]]}
 
 
 def _scenes(
@@ -151,7 +203,7 @@ def run(
             continue
         aligned = align_fragments({f.id: f.frame for f in scene.frames}, params, clock)
         result = aligned.result.model_dump(mode="json")
-        truth = frame_ground_truth_json(scene)
+        truth = merged_truth(frame_ground_truth_json(scene), result)
         report = evaluate_result(result, truth)
         verdict = main_room_verdict(result, report.global_correct)
         if verdict is not None:
@@ -271,6 +323,13 @@ def main() -> None:
         help="the cameras' pitch range, degrees (negative: down; the generator's: -20 -5)",
     )
     parser.add_argument("--roll", type=float, help="the cameras' largest roll, degrees (3)")
+    parser.add_argument(
+        "--overlap",
+        type=float,
+        metavar="M",
+        help="largest overlap of neighbouring frames' stretches of wall, m (the generator's: "
+        "0.3; robots turning on the spot overlap by metres)",
+    )
     add_params_option(parser)
     args = parser.parse_args()
     params = params_with(args.set)
@@ -280,8 +339,10 @@ def main() -> None:
         stance["pitch_deg"] = tuple(args.pitch)
     if args.roll is not None:
         stance["roll_deg"] = args.roll
+    if args.overlap is not None:
+        stance["gap_range"] = (-args.overlap, FrameSpec().gap_range[1])
     if stance and (args.fit or args.anatomy):
-        parser.error("--pitch and --roll apply to the table and --fit-view-top only")
+        parser.error("--pitch, --roll and --overlap apply to the table and --fit-view-top only")
     if args.fit_view_top:
         if not args.pitch:
             parser.error("--fit-view-top needs --pitch (views steeper than the fitted)")

@@ -150,8 +150,8 @@ def fit_logit_shift(
     some ``extra`` (their mean confidence and share right, Brier before and after).
 
     >>> slope, _ = fit_logit_shift([0.8] * 4, [True, False, False, False], [1.0] * 4)
-    >>> round(slope, 2)  # logit(0.25) - logit(0.8)
-    -2.49
+    >>> round(slope, 3)  # logit(0.25) - logit(0.8) = -2.4849
+    -2.485
     """
     conf = np.clip(np.asarray(confidences, dtype=np.float64), 1e-9, 1 - 1e-9)
     logit = np.log(conf / (1 - conf))
@@ -162,7 +162,9 @@ def fit_logit_shift(
         z = logit + slope * more
         return float(np.sum(np.logaddexp(0.0, z) - ok * z))
 
-    slope = float(minimize_scalar(loss, bounds=(-30.0, 0.0), method="bounded").x)
+    slope = float(
+        minimize_scalar(loss, bounds=(-30.0, 0.0), method="bounded", options={"xatol": 1e-8}).x
+    )
     moved = more > 0
     after = 1.0 / (1.0 + np.exp(-(logit + slope * more)))
     summary = (
@@ -210,28 +212,31 @@ def share_interval(right: int, total: int, z: float = 1.96) -> tuple[float, floa
 
 def params_with(settings: Iterable[str]) -> PipelineParams:
     """The default parameters with ``SECTION.FIELD=VALUE`` settings applied (VALUE as JSON,
-    or else a string), validated: how a benchmark measures a change without editing code.
+    or else a string; a nested section is spelled out, ``layout.frame.min_inliers``),
+    validated: how a benchmark measures a change without editing code.
 
     >>> params_with(["placement.weight_outside=0"]).placement.weight_outside
     0.0
+    >>> params_with(["layout.frame.min_inliers=50"]).layout.frame.min_inliers
+    50
     """
-    sections: dict[str, dict[str, Any]] = {}
+    data = PipelineParams().model_dump()
     for setting in settings:
         key, _, raw = setting.partition("=")
-        section, _, name = key.partition(".")
+        *path, name = key.split(".")
+        if not path:
+            raise ValueError(f"{key!r}: no parameter section")
+        section = data
+        for k, part in enumerate(path):
+            if not isinstance(section.get(part), dict):
+                raise ValueError(f"no parameter section {'.'.join(path[: k + 1])!r}")
+            section = section[part]
+        if name not in section:
+            raise ValueError(f"{'.'.join(path)}: no parameter [{name!r}]")
         try:
-            value = json.loads(raw)
+            section[name] = json.loads(raw)
         except json.JSONDecodeError:
-            value = raw
-        sections.setdefault(section, {})[name] = value
-    data = PipelineParams().model_dump()
-    for section, values in sections.items():
-        if section not in data or not isinstance(data[section], dict):
-            raise ValueError(f"no parameter section {section!r}")
-        unknown = set(values) - set(data[section])
-        if unknown:
-            raise ValueError(f"{section}: no parameter {sorted(unknown)}")
-        data[section].update(values)
+            section[name] = raw
     return PipelineParams.model_validate(data)
 
 

@@ -4,6 +4,7 @@ timed once (a merged group's as one)."""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from bench.rgbd_frames import (
     bucket_row,
     cached_scenes,
     limits,
+    merged_truth,
     run,
 )
 from bench.tune_placement import LIMITS, main
@@ -126,3 +128,38 @@ def test_the_frames_weights_pool_the_rooms_of_every_camera_given(
     seen = [int(printed.split(f"{camera}: ")[1].split()[0]) for camera in ("kinect", "wide")]
     fitted_on = int(printed.split("weights before: ")[1].split()[2])  # "N of M": M rooms
     assert min(seen) >= 1 and fitted_on == sum(seen)
+
+
+def _frame_truth(fid: str, start: float, end: float) -> dict[str, object]:
+    return {"id": fid, "pose": np.eye(4).tolist(), "loop_start": start, "loop_end": end,
+            "diagonal": 2.0, "keypoints_local": [[0.0, 0.0, 0.0]]}  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("arcs", "union"),
+    [
+        # 4 m square, CCW from (0, 0): frames overlapping on the wall x = 4
+        ({"a": (1.0, 5.0), "b": (4.0, 9.0)}, [[1, 0], [4, 0], [4, 4], [3, 4]]),
+        # the same stretch listed the other way round, and one across the loop's start
+        ({"b": (4.0, 9.0), "a": (1.0, 5.0)}, [[1, 0], [4, 0], [4, 4], [3, 4]]),
+        ({"a": (15.0, 2.0), "b": (1.0, 3.0)}, [[0, 1], [0, 0], [3, 0]]),
+    ],
+)
+def test_a_merged_groups_frames_are_judged_against_the_stretch_the_group_saw(
+    arcs: dict[str, tuple[float, float]], union: list[list[float]]
+) -> None:
+    square = [[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]]
+    fragments = [_frame_truth(fid, *arc) for fid, arc in arcs.items()]
+    alone = _frame_truth("alone", 9.5, 12.0)
+    truth: dict[str, Any] = {
+        "room": {"polygon": square, "floor_z": 0.0, "ceiling_z": 2.5},
+        "fragments": [*fragments, alone],
+    }
+    anchor, member = list(arcs)
+    result = {"fragments": [{"id": anchor}, {"id": member, "merged_into": anchor}, {"id": "alone"}]}
+    judged = {f["id"]: f for f in merged_truth(truth, result)["fragments"]}
+    for fid in arcs:
+        np.testing.assert_allclose(judged[fid]["keypoints_world"], union, atol=1e-9)
+        np.testing.assert_allclose(np.asarray(judged[fid]["keypoints_local"])[:, :2], union)
+        assert judged[fid]["diagonal"] >= float(np.linalg.norm(np.ptp(union, axis=0)))
+    assert judged["alone"] == alone  # an unmerged frame keeps its own

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.scoring import fit_logit_map, main_room_verdict, share_interval
+from bench.scoring import fit_logit_map, main_room_verdict, params_with, share_interval
 from services.evaluation import evaluate_result
 from services.pipeline import place_site
 from services.synthetic import ground_truth_json
@@ -66,3 +66,14 @@ def test_a_share_interval_holds_the_share_and_narrows_with_more_scenes(right, to
     # 30 of 30 right still leaves room for a true share under 90 %.
     if right == total == 30:
         assert lo == pytest.approx(0.886, abs=1e-3)
+
+
+def test_a_benchmark_sets_nested_parameters_and_is_told_of_unknown_ones() -> None:
+    params = params_with(["layout.frame.merge_inlier_share=1.0", "placement.weight_outside=0"])
+    assert params.layout.frame.merge_inlier_share == 1.0
+    assert params.placement.weight_outside == 0.0
+    for wrong in ("layout.frame.no_such=1", "layout.nowhere.x=1", "weight_outside=0"):
+        with pytest.raises(ValueError):
+            params_with([wrong])
+    with pytest.raises(ValueError):  # validated: a share over 1
+        params_with(["layout.frame.merge_inlier_share=2"])
