@@ -105,6 +105,12 @@ class FrameParams(BaseModel):
         0.05, gt=0, description="3D distance under which a match agrees with the fit, m"
     )
     ransac_iterations: int = Field(400, ge=10, description="rigid-fit RANSAC iterations")
+    merge_stations: bool = Field(
+        False,
+        description="merge single frames whose view ranges say they share a camera (a robot "
+        "turning on the spot; placement.station_view_* decide) as ORB-merged frames are "
+        "(off: no better on frames overlapping by metres, see the README)",
+    )
     corner_price: float = Field(
         0.2,
         ge=0,

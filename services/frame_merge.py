@@ -8,6 +8,9 @@ merge when the fit explains at least ``merge_inlier_share`` of the matches and
 object) refuse the merge. Frames joined by accepted pairs form a group, posed in the optical
 frame of its first member (as :func:`services.registration.premerge` groups clouds), and are
 laid out as one fragment.
+
+Frames of one station whose plain walls give ORB nothing are grouped by their views instead
+(:func:`station_groups`): the same directions meet the same walls at the same distances.
 """
 
 from __future__ import annotations
@@ -21,11 +24,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from schemas.frames import FrameParams
-from schemas.params import PipelineParams
+from schemas.params import PipelineParams, PlacementParams
 from schemas.result import LocalLayoutModel, ResultModel
 from services.frame_layout import FrameCamera, estimate_frame_layout, frame_points
 from services.rgbd import RgbdFrame, valid_depth
 from services.types import FloatArray, LocalLayout
+from services.view_ranges import station_mates
 
 __all__ = [
     "FrameFeatures",
@@ -36,6 +40,7 @@ __all__ = [
     "group_frames",
     "group_layout",
     "match_frames",
+    "station_groups",
 ]
 
 
@@ -161,6 +166,14 @@ def group_frames(
             if found.merged and found.transform is not None:
                 edges[a][b] = found.transform  # b -> a
                 edges[b][a] = np.asarray(np.linalg.inv(found.transform), dtype=np.float64)
+    return _connected(ids, edges)
+
+
+def _connected(
+    ids: Sequence[str], edges: Mapping[str, Mapping[str, FloatArray]]
+) -> list[FrameGroup]:
+    """The groups ``edges`` (id -> other id -> (4, 4) the other's frame -> the id's) join,
+    in the order of ``ids``, each anchored at its first id."""
     groups, seen = [], set()
     for anchor in ids:
         if anchor in seen:
@@ -176,6 +189,38 @@ def group_frames(
         seen |= set(transforms)
         groups.append(FrameGroup(anchor, transforms))
     return groups
+
+
+def station_groups(
+    layouts: Mapping[str, LocalLayout], params: PlacementParams = PlacementParams()
+) -> list[FrameGroup]:
+    """Groups of single frames whose views say they share a camera
+    (:func:`services.view_ranges.station_mates`; singletons for the rest), in the order of
+    ``layouts``; each group's anchor is its first frame.
+
+    Two frames of one station are one rotation apart about their common camera: the quarter
+    turn between their aligned frames that the view ranges found, between the Manhattan
+    frames each was levelled and squared to (``LocalLayout.frame.rotation``, optical ->
+    aligned), with no translation.
+    """
+    mates = station_mates(layouts, params)
+    edges: dict[str, dict[str, FloatArray]] = {fid: {} for fid in layouts}
+    for first, found in mates.items():
+        for second, turn in found.items():
+            motion = np.eye(4)  # the second's optical frame -> the first's
+            motion[:3, :3] = (
+                layouts[first].frame.rotation.T
+                @ _quarter_turn(turn)
+                @ layouts[second].frame.rotation
+            )
+            edges[first][second] = motion
+    return _connected(list(layouts), edges)
+
+
+def _quarter_turn(turns: int) -> FloatArray:
+    """(3, 3) rotation by ``turns`` quarter turns about the aligned frame's up axis."""
+    c, s = [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)][turns % 4]
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def group_layout(

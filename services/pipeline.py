@@ -35,7 +35,13 @@ from services.confidence import (
     same_room,
 )
 from services.fragments import Fragment, fragment_layout, fragment_points
-from services.frame_merge import FrameGroup, expand_frame_groups, group_frames, group_layout
+from services.frame_merge import (
+    FrameGroup,
+    expand_frame_groups,
+    group_frames,
+    group_layout,
+    station_groups,
+)
 from services.geometry import is_simple_rectilinear
 from services.layout_model import build_polygon
 from services.local_layout import estimate_local_layout
@@ -767,6 +773,8 @@ def align_fragments(
         return _premerged_alignment(clouds, params, report, hints)
     groups = _frame_groups(fragments, params, report)
     layouts = _local_layouts(fragments, groups, params, report)
+    if params.layout.frame.merge_stations:
+        groups, layouts = _with_stations_merged(fragments, groups, layouts, params)
     result = place_site(layouts, params, report, hints=hints)
     if any(len(group.transforms) > 1 for group in groups):
         result = expand_frame_groups(result, groups, list(fragments))
@@ -828,6 +836,41 @@ def _local_layouts(
         else:
             layouts[fid] = fragment_layout(fragments[fid], params)
     return layouts
+
+
+def _with_stations_merged(
+    fragments: Mapping[str, Fragment],
+    groups: Sequence[FrameGroup],
+    layouts: Mapping[str, LocalLayout],
+    params: PipelineParams,
+) -> tuple[list[FrameGroup], dict[str, LocalLayout]]:
+    """The frame groups and layouts with the single frames of one station merged
+    (:func:`services.frame_merge.station_groups`) and laid out as one fragment under their
+    first frame's id; a group whose layout finds no chain stays apart."""
+    singles = {
+        group.anchor_id: layouts[group.anchor_id]
+        for group in groups
+        if len(group.transforms) == 1 and layouts[group.anchor_id].ok
+    }
+    if len(singles) < 2:
+        return list(groups), dict(layouts)
+    frames = {fid: f for fid, f in fragments.items() if isinstance(f, RgbdFrame)}
+    merged: dict[str, FrameGroup] = {}
+    out = dict(layouts)
+    for station in station_groups(singles, params.placement):
+        if len(station.transforms) < 2:
+            continue
+        layout = group_layout(station, frames, params)
+        if layout.ok:
+            merged[station.anchor_id] = station
+            for fid in station.transforms:
+                del out[fid]
+            out[station.anchor_id] = layout
+    if not merged:
+        return list(groups), dict(layouts)
+    members = {fid for station in merged.values() for fid in station.transforms}
+    kept = [group for group in groups if group.anchor_id not in members]
+    return kept + list(merged.values()), out
 
 
 def _premerged_alignment(

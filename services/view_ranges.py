@@ -16,7 +16,9 @@ passed share a station and the truth's turn; 18 found another turn (a room that 
 turned, as from the middle of a rectangle) and 1 was two stations whose views look alike.
 So a pair is only a station for an assembly that turns its two pieces as the pair says
 (:func:`services.refinement.refine_translations`, where the walls may still refuse it), and
-never a merge.
+a merge only when asked (``layout.frame.merge_stations``,
+:func:`services.frame_merge.station_groups`: on rooms whose frames overlap by metres it did
+no better).
 """
 
 from __future__ import annotations

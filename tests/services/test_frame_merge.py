@@ -8,7 +8,16 @@ import numpy as np
 import pytest
 
 from schemas.frames import FrameParams
-from services.frame_merge import frame_features, group_frames, group_layout, match_frames
+from schemas.params import PipelineParams
+from services.fragments import fragment_layout
+from services.frame_merge import (
+    frame_features,
+    group_frames,
+    group_layout,
+    match_frames,
+    station_groups,
+)
+from services.pipeline import align_fragments
 from services.rgbd import RgbdFrame
 from services.synthetic.furniture import Furnishing
 from services.synthetic.room import Room
@@ -63,3 +72,31 @@ def test_matches_whose_depths_disagree_are_refused(views) -> None:
 def test_frames_without_colour_have_no_features(views) -> None:
     a = views["a"][0]
     assert len(frame_features(RgbdFrame(a.depth, a.intrinsics)).points) == 0
+
+
+@pytest.mark.parametrize("yaws", [(90.0, 110.0), (200.0, 245.0)])  # a quarter turn apart
+def test_frames_of_one_station_group_by_their_views_with_the_true_motion(yaws) -> None:
+    room = Room.from_polygon(np.array([[0.0, 0], [5, 0], [5, 4], [0, 4]]), 2.6)
+    stances = {
+        name: ((2.5, 1.5, 1.3), yaw, math.degrees(-0.2))
+        for name, yaw in zip(("a", "b", "c"), (*yaws, yaws[0] + 180.0), strict=True)
+    }
+    views = render_views(room, Furnishing(), stances)
+    plain = {name: RgbdFrame(frame.depth, frame.intrinsics) for name, (frame, _) in views.items()}
+    groups = station_groups({name: fragment_layout(frame) for name, frame in plain.items()})
+    assert [sorted(g.transforms) for g in groups] == [["a", "b"], ["c"]]
+    truth = np.linalg.inv(views["a"][1]) @ views["b"][1]  # b's optical frame -> a's
+    motion = groups[0].transforms["b"]
+    assert np.abs(motion[:3, :3] - truth[:3, :3]).max() < 0.03  # within 2 degrees
+    assert np.allclose(motion[:3, 3], 0.0) and np.linalg.norm(truth[:3, 3]) < 1e-6
+
+
+@pytest.mark.parametrize("merge", [False, True])
+def test_align_merges_plain_frames_of_one_station_only_when_asked(views, merge) -> None:
+    plain = {name: RgbdFrame(frame.depth, frame.intrinsics) for name, (frame, _) in views.items()}
+    params = PipelineParams()
+    frame = params.layout.frame.model_copy(update={"merge_stations": merge})
+    params = params.model_copy(update={"layout": params.layout.model_copy(update={"frame": frame})})
+    result = align_fragments(plain, params).result
+    merged = {f["id"]: f.get("merged_into") for f in result.model_dump()["fragments"]}
+    assert merged == ({"a": None, "b": "a", "c": None} if merge else dict.fromkeys("abc"))
