@@ -27,6 +27,7 @@ from schemas.frames import FrameParams
 from schemas.params import PipelineParams, PlacementParams
 from schemas.result import LocalLayoutModel, ResultModel
 from services.frame_layout import FrameCamera, estimate_frame_layout, frame_points
+from services.placement.pieces import rot90
 from services.rgbd import RgbdFrame, valid_depth
 from services.types import FloatArray, LocalLayout
 from services.view_ranges import station_mates
@@ -219,8 +220,9 @@ def station_groups(
 
 def _quarter_turn(turns: int) -> FloatArray:
     """(3, 3) rotation by ``turns`` quarter turns about the aligned frame's up axis."""
-    c, s = [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)][turns % 4]
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    turn = np.eye(3)
+    turn[:2, :2] = rot90(turns)
+    return turn
 
 
 def group_layout(
