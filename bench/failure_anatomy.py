@@ -3,8 +3,11 @@
 For every scene of a split whose main room is wrong, one cause:
 
 * ``layout``: a fragment's chain is wrong on the floor plan by the paper's 5 % test (its
-  keypoints seen from above: a floor height the scan could not see does not count), or it
-  was unusable (no assembly of these chains can be the room);
+  keypoints seen from above: a floor height the scan could not see does not count) and
+  strays from its true chain (a chain that only misses part of its stretch, every wall on
+  the truth within 0.15 m, :func:`bench.scoring.chain_on_truth`, does not count: the true
+  assembly is scored with it), or it was unusable (no assembly of these chains can be the
+  room);
 * ``not a loop``: the true order and turns do not make a valid closed loop of these chains
   (walls cross, or a junction folds back): the search cannot return it;
 * ``search``: the true assembly has a lower energy than the best found (frames: with its
@@ -44,7 +47,13 @@ from rich.table import Table
 
 from bench.placement_trust import noisy_priors
 from bench.rgbd_frames import cached_scenes, outlines_for_seeds
-from bench.scoring import add_params_option, chain_error_in_plan, params_with, true_assembly
+from bench.scoring import (
+    add_params_option,
+    chain_error_in_plan,
+    chain_on_truth,
+    params_with,
+    true_assembly,
+)
 from bench.world_scenes import (
     DEFAULT_CACHE,
     CachedScene,
@@ -166,10 +175,11 @@ def frame_scenes(
 
 def _chains_right_in_plan(result: dict[str, Any], truth: dict[str, Any]) -> bool:
     """Every fragment's chain within 5 % of its diagonal of the truth, both seen along the
-    fragment's true up axis."""
+    fragment's true up axis, or lying on its true chain (:func:`bench.scoring.chain_on_truth`)."""
     estimated = {f["id"]: f["local_layout"]["keypoints"] for f in result["fragments"]}
     return all(
         chain_error_in_plan(estimated.get(f["id"], []), f) < 0.05 * float(f["diagonal"])
+        or chain_on_truth(estimated.get(f["id"], []), f)
         for f in truth["fragments"]
     )
 

@@ -16,6 +16,7 @@ from scipy.optimize import minimize, minimize_scalar
 
 from schemas.params import PipelineParams, PlacementParams
 from services.evaluation import keypoint_error
+from services.geometry import distance_to_chain
 from services.layout_model import build_polygon
 from services.pipeline import fragment_pose
 from services.placement import Piece, PlacementCandidate, translations_of
@@ -28,6 +29,7 @@ __all__ = [
     "alternative_results",
     "candidate_result",
     "chain_error_in_plan",
+    "chain_on_truth",
     "fit_logistic",
     "fit_logit_map",
     "fit_logit_shift",
@@ -250,6 +252,28 @@ def add_params_option(parser: argparse.ArgumentParser) -> None:
         metavar="SECTION.FIELD=VALUE",
         help="an algorithm parameter other than its default, e.g. placement.use_outside=false",
     )
+
+
+def chain_on_truth(
+    estimated_local: Any, fragment: Mapping[str, Any], tolerance: float = 0.15
+) -> bool:
+    """Whether a fragment's chain (K >= 2) lies on its true chain in the floor plan: every
+    point of its walls within ``tolerance`` m of the true walls (seen from above, world
+    frame). Such a chain may miss part of its stretch (a piece seen past a protruding corner
+    left out) but places no wall where there is none.
+
+    estimated_local: (K, 3) fragment-local keypoints; fragment: its ground truth JSON
+    (``pose`` local -> world, ``keypoints_world``).
+    """
+    est = np.asarray(estimated_local, dtype=np.float64).reshape(-1, 3)
+    if len(est) < 2:
+        return False
+    pose = np.asarray(fragment["pose"], dtype=np.float64)
+    plan = (est @ pose[:3, :3].T + pose[:3, 3])[:, :2]
+    share = np.linspace(0.0, 1.0, 21)[None, :, None]  # 21 points along each wall
+    points = (plan[:-1, None, :] + share * (plan[1:] - plan[:-1])[:, None, :]).reshape(-1, 2)
+    true = np.asarray(fragment["keypoints_world"], dtype=np.float64)[:, :2]
+    return bool(np.all(distance_to_chain(points, true) <= tolerance))
 
 
 def chain_error_in_plan(estimated_local: Any, fragment: Mapping[str, Any]) -> float:

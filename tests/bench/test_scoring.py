@@ -6,7 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.scoring import fit_logit_map, main_room_verdict, params_with, share_interval
+from bench.scoring import (
+    chain_on_truth,
+    fit_logit_map,
+    main_room_verdict,
+    params_with,
+    share_interval,
+)
 from services.evaluation import evaluate_result
 from services.pipeline import place_site
 from services.synthetic import ground_truth_json
@@ -77,3 +83,15 @@ def test_a_benchmark_sets_nested_parameters_and_is_told_of_unknown_ones() -> Non
             params_with([wrong])
     with pytest.raises(ValueError):  # validated: a share over 1
         params_with(["layout.frame.merge_inlier_share=2"])
+
+
+def test_a_chain_that_misses_part_of_its_stretch_lies_on_the_truth_and_a_stray_one_does_not() -> (
+    None
+):
+    pose = np.eye(4)
+    pose[:3, 3] = [1.0, 2.0, 0.0]  # local -> world
+    fragment = {"pose": pose.tolist(), "keypoints_world": [[1.0, 2.0], [4.0, 2.0], [4.0, 4.0]]}
+    assert chain_on_truth([[1.0, 0.0, 0.0], [3.0, 0.0, 0.0], [3.0, 1.0, 0.0]], fragment)
+    assert not chain_on_truth([[1.0, 0.3, 0.0], [3.0, 0.3, 0.0]], fragment)  # a front
+    assert not chain_on_truth([[0.0, 0.0, 0.0], [4.0, 0.0, 0.0]], fragment)  # past the corner
+    assert not chain_on_truth([[1.0, 0.0, 0.0]], fragment)
