@@ -263,16 +263,16 @@ def chain_on_truth(
     left out) but places no wall where there is none.
 
     estimated_local: (K, 3) fragment-local keypoints; fragment: its ground truth JSON
-    (``pose`` local -> world, ``keypoints_world``).
+    (``pose`` local -> world, ``keypoints_local``).
     """
     est = np.asarray(estimated_local, dtype=np.float64).reshape(-1, 3)
     if len(est) < 2:
         return False
     pose = np.asarray(fragment["pose"], dtype=np.float64)
-    plan = (est @ pose[:3, :3].T + pose[:3, 3])[:, :2]
+    true_local = np.asarray(fragment["keypoints_local"], dtype=np.float64).reshape(-1, 3)
+    plan, true = ((k @ pose[:3, :3].T + pose[:3, 3])[:, :2] for k in (est, true_local))
     share = np.linspace(0.0, 1.0, 21)[None, :, None]  # 21 points along each wall
     points = (plan[:-1, None, :] + share * (plan[1:] - plan[:-1])[:, None, :]).reshape(-1, 2)
-    true = np.asarray(fragment["keypoints_world"], dtype=np.float64)[:, :2]
     return bool(np.all(distance_to_chain(points, true) <= tolerance))
 
 

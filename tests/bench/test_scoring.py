@@ -90,7 +90,8 @@ def test_a_chain_that_misses_part_of_its_stretch_lies_on_the_truth_and_a_stray_o
 ):
     pose = np.eye(4)
     pose[:3, 3] = [1.0, 2.0, 0.0]  # local -> world
-    fragment = {"pose": pose.tolist(), "keypoints_world": [[1.0, 2.0], [4.0, 2.0], [4.0, 4.0]]}
+    true_local = [[0.0, 0.0, 0.0], [3.0, 0.0, 0.0], [3.0, 2.0, 0.0]]  # the truth, in the world
+    fragment = {"pose": pose.tolist(), "keypoints_local": true_local}  # from (1, 2) on
     assert chain_on_truth([[1.0, 0.0, 0.0], [3.0, 0.0, 0.0], [3.0, 1.0, 0.0]], fragment)
     assert not chain_on_truth([[1.0, 0.3, 0.0], [3.0, 0.3, 0.0]], fragment)  # a front
     assert not chain_on_truth([[0.0, 0.0, 0.0], [4.0, 0.0, 0.0]], fragment)  # past the corner
