@@ -806,11 +806,16 @@ def _silent(stage: str, fraction: float) -> None:
     """The progress callback of a caller that asked for none."""
 
 
+def _rgbd_frames(fragments: Mapping[str, Fragment]) -> dict[str, RgbdFrame]:
+    """The fragments that are RGB-D frames, by id."""
+    return {fid: f for fid, f in fragments.items() if isinstance(f, RgbdFrame)}
+
+
 def _frame_groups(
     fragments: Mapping[str, Fragment], params: PipelineParams, report: ProgressFn
 ) -> list[FrameGroup]:
     """Overlapping RGB-D frames merged by ORB matching (groups of one for the rest)."""
-    frames = {fid: f for fid, f in fragments.items() if isinstance(f, RgbdFrame)}
+    frames = _rgbd_frames(fragments)
     if len(frames) < 2:
         return [FrameGroup(fid, {fid: np.eye(4)}) for fid in frames]
     report("frame groups", 0.0)
@@ -826,7 +831,7 @@ def _local_layouts(
     """A layout per fragment, a merged group's (from all its frames) under its anchor's id."""
     members = {fid for group in groups for fid in group.transforms}
     anchors = {group.anchor_id: group for group in groups}
-    frames = {fid: f for fid, f in fragments.items() if isinstance(f, RgbdFrame)}
+    frames = _rgbd_frames(fragments)
     todo = [fid for fid in fragments if fid not in members or fid in anchors]
     layouts: dict[str, LocalLayout] = {}
     for index, fid in enumerate(todo):
@@ -854,7 +859,7 @@ def _with_stations_merged(
     }
     if len(singles) < 2:
         return list(groups), dict(layouts)
-    frames = {fid: f for fid, f in fragments.items() if isinstance(f, RgbdFrame)}
+    frames = _rgbd_frames(fragments)
     merged: dict[str, FrameGroup] = {}
     out = dict(layouts)
     for station in station_groups(singles, params.placement):
@@ -866,8 +871,6 @@ def _with_stations_merged(
             for fid in station.transforms:
                 del out[fid]
             out[station.anchor_id] = layout
-    if not merged:
-        return list(groups), dict(layouts)
     members = {fid for station in merged.values() for fid in station.transforms}
     kept = [group for group in groups if group.anchor_id not in members]
     return kept + list(merged.values()), out
