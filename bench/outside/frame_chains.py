@@ -10,6 +10,9 @@ from the room's outline (:func:`chain_strays`): ``beyond`` the room (through a d
 window, an end run on past a corner) or ``within`` it (a step cut across, a front taken for
 the wall); wrong past ``WRONG`` metres either way. A chain cut short along the outline
 passes: this finds the chains that lead a room astray, not every chain a scorer would fail.
+A second table (:func:`overlap_table`) puts each right chain on the outline's perimeter
+(:func:`chain_span`) and sets apart, per number of stations, the rooms whose neighbouring
+stretches overlap by more than :data:`BIG_OVERLAP` at a junction of their loop.
 
     .venv/bin/python -m bench.outside.frame_chains --out DIR [--per-camera 20] [--seed 8]
         [--list] [--workers 2]
@@ -30,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.outside.clouds import boundary_project, perimeter_cum
 from bench.outside.run import Job, frame_jobs
 from bench.outside.score import true_fragments
 from cli.frames import read_frame_dir
@@ -39,9 +43,23 @@ from services.geometry import distance_to_polygon, points_in_polygon
 from services.model_export import to_site
 from services.types import FloatArray
 
-__all__ = ["WRONG", "FrameChain", "chain_strays", "chain_table", "main", "room_chains"]
+__all__ = [
+    "BIG_OVERLAP",
+    "WRONG",
+    "FrameChain",
+    "chain_span",
+    "chain_strays",
+    "chain_table",
+    "junction_overlaps",
+    "main",
+    "overlap_table",
+    "room_chains",
+]
 
 WRONG = 0.3  # m: a chain straying farther from the outline is wrong
+# m: neighbours overlapping more than this at a junction are more than the brief's world
+# (up to 0.5 m) and the placement's junction model expect
+BIG_OVERLAP = 0.6
 _SAMPLES = 40  # points per wall the strays are measured at
 
 
@@ -57,6 +75,12 @@ class FrameChain:
     beyond: float
     within: float
     room_right: bool | None
+    # The stretch of the outline's perimeter the chain covers (m from the outline's first
+    # vertex, start <= end; :func:`chain_span`), None for a wrong chain or none; the room's
+    # stations and perimeter.
+    span: tuple[float, float] | None = None
+    stations: int = 0
+    perimeter: float = 0.0
 
     @property
     def wrong(self) -> bool:
@@ -74,12 +98,49 @@ def chain_strays(chain: FloatArray, polygon: FloatArray) -> tuple[float, float]:
     >>> chain_strays(np.array([[1.0, 0.5], [3.0, 0.5]]), square)
     (0.0, 0.5)
     """
-    t = np.linspace(0.0, 1.0, _SAMPLES)[None, :, None]
-    steps = (chain[1:] - chain[:-1])[:, None, :]
-    points = (chain[:-1, None, :] + t * steps).reshape(-1, 2)
+    points = _chain_samples(chain)
     distance = distance_to_polygon(points, polygon)
     inside = points_in_polygon(points, polygon)
     return float(distance[~inside].max(initial=0.0)), float(distance[inside].max(initial=0.0))
+
+
+def _chain_samples(chain: FloatArray) -> FloatArray:
+    """(S, 2) points along a chain's walls, ``_SAMPLES`` per wall."""
+    t = np.linspace(0.0, 1.0, _SAMPLES)[None, :, None]
+    steps = (chain[1:] - chain[:-1])[:, None, :]
+    return (chain[:-1, None, :] + t * steps).reshape(-1, 2)
+
+
+def chain_span(chain: FloatArray, polygon: FloatArray) -> tuple[float, float]:
+    """The stretch of the outline's perimeter a chain lying on it covers: meters from the
+    outline's first vertex to where it starts (``[0, perimeter)``) and ends (start or more;
+    past the perimeter where it runs across the first vertex). The chain is taken to cover
+    less than half the perimeter.
+
+    >>> square = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]])
+    >>> chain_span(np.array([[1.0, 0.0], [4.0, 0.0], [4.0, 2.0]]), square)
+    (1.0, 6.0)
+    >>> chain_span(np.array([[0.0, 1.0], [0.0, 0.0], [2.0, 0.0]]), square)
+    (15.0, 18.0)
+    """
+    cum, _ = perimeter_cum(polygon)
+    perimeter = float(cum[-1])
+    _, position = boundary_project(_chain_samples(chain), polygon, cum)
+    turned = np.unwrap(position * (2.0 * np.pi / perimeter)) * (perimeter / (2.0 * np.pi))
+    start = float(turned.min()) % perimeter
+    return round(start, 9), round(start + float(turned.max() - turned.min()), 9)
+
+
+def junction_overlaps(spans: Sequence[tuple[float, float]], perimeter: float) -> list[float]:
+    """Per junction of the loop the spans make (in the order of their starts), how far a
+    span runs on past the next one's start: positive an overlap, negative a gap (m).
+
+    >>> junction_overlaps([(0.0, 5.0), (4.5, 9.0), (9.3, 16.4)], 16.0)
+    [0.5, -0.3, 0.4]
+    """
+    ordered = sorted(spans)
+    starts = [start for start, _ in ordered[1:]] + [ordered[0][0] + perimeter]
+    return [round(end - start, 9) for (_, end), start in zip(ordered, starts, strict=True)]
 
 
 def room_chains(
@@ -91,15 +152,22 @@ def room_chains(
     polygon = np.asarray(truth["polygon"], dtype=np.float64)
     score = folder / "score.json"
     right = json.loads(score.read_text())["main"]["acc"] if score.exists() else None
+    stations = len(truth.get("stations", []))
+    perimeter = float(perimeter_cum(polygon)[0][-1])
     out = []
     for fid, (pose, _) in sorted(true_fragments(truth).items()):
         layout = fragment_layout(read_frame_dir(folder / "frames" / fid, params), params)
+        span = None
         if layout.ok:
             chain = to_site(layout.keypoints_local(), pose)[:, :2]
             beyond, within = chain_strays(chain, polygon)
+            if max(beyond, within) <= WRONG:
+                span = chain_span(chain, polygon)
         else:
             beyond = within = float("inf")
-        out.append(FrameChain(folder.name, camera, fid, beyond, within, right))
+        out.append(
+            FrameChain(folder.name, camera, fid, beyond, within, right, span, stations, perimeter)
+        )
     return out
 
 
@@ -125,6 +193,36 @@ def chain_table(rows: Sequence[FrameChain]) -> str:
             f"{sum(r.beyond >= r.within for r in wrong)} | "
             f"{sum(r.beyond < r.within for r in wrong)} | {len(strayed)} of {len(rooms)} | "
             f"{len(failed & strayed)} of {len(failed)} |"
+        )
+    return "\n".join(lines)
+
+
+def overlap_table(rows: Sequence[FrameChain]) -> str:
+    """Per number of stations: rooms, rooms right, and how the rooms fare whose frames
+    overlap by more than :data:`BIG_OVERLAP` at a junction of the loop their right chains
+    make (:func:`junction_overlaps`) against the others."""
+    by_room: dict[str, list[FrameChain]] = defaultdict(list)
+    for row in rows:
+        by_room[row.room].append(row)
+    lines = [
+        f"| stations | rooms | right | overlap > {BIG_OVERLAP} m at a junction | right of those "
+        "| right of the others | median largest overlap, m |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    rooms: dict[int, list[tuple[float, bool | None]]] = defaultdict(list)
+    for frames in by_room.values():
+        spans = [f.span for f in frames if f.span is not None]
+        largest = max(junction_overlaps(spans, frames[0].perimeter)) if spans else 0.0
+        rooms[frames[0].stations].append((largest, frames[0].room_right))
+    for stations in sorted(rooms):
+        group = rooms[stations]
+        big = [right for largest, right in group if largest > BIG_OVERLAP]
+        rest = [right for largest, right in group if largest <= BIG_OVERLAP]
+        lines.append(
+            f"| {stations} | {len(group)} | {sum(r is True for _, r in group)} | {len(big)} | "
+            f"{sum(r is True for r in big)} of {len(big)} | "
+            f"{sum(r is True for r in rest)} of {len(rest)} | "
+            f"{float(np.median([largest for largest, _ in group])):.2f} |"
         )
     return "\n".join(lines)
 
@@ -160,6 +258,8 @@ def main(argv: list[str] | None = None) -> int:
                     f"({verdict[r.room_right]})"
                 )
     print(chain_table(rows))
+    print()
+    print(overlap_table(rows))
     return 0
 
 

@@ -9,7 +9,17 @@ import numpy as np
 import pytest
 
 from bench.outside import frames
-from bench.outside.frame_chains import WRONG, FrameChain, chain_strays, chain_table, main
+from bench.outside.frame_chains import (
+    BIG_OVERLAP,
+    WRONG,
+    FrameChain,
+    chain_span,
+    chain_strays,
+    chain_table,
+    junction_overlaps,
+    main,
+    overlap_table,
+)
 from bench.outside.run import frame_jobs
 
 pytestmark = pytest.mark.timeout(180)
@@ -51,6 +61,46 @@ def test_a_draws_folder_is_judged_frame_by_frame(tmp_path: Path, capsys) -> None
     out = capsys.readouterr().out
     assert len(list(tmp_path.glob("*/truth.json"))) == 3
     rows = [line for line in out.splitlines() if line.startswith("| ")]
-    assert rows[0].startswith("| camera |") and rows[-1].startswith("| all |")
+    ends = [k for k, row in enumerate(rows) if row.startswith("| all |")]
+    assert rows[0].startswith("| camera |") and len(ends) == 1
+    assert rows[ends[0] + 1].startswith("| stations |")
     total = json.loads((folder / "truth.json").read_text())["n_frames"]
     assert f"| wide | {total} |" in out
+
+
+def test_a_chains_span_runs_along_the_outline_across_its_first_vertex():
+    assert chain_span(np.array([[1.0, 0.0], [4.0, 0.0], [4.0, 2.0]]), _SQUARE) == (1.0, 6.0)
+    # Drawn against the outline's direction, it covers the same stretch.
+    assert chain_span(np.array([[4.0, 2.0], [4.0, 0.0], [1.0, 0.0]]), _SQUARE) == (1.0, 6.0)
+    assert chain_span(np.array([[0.0, 1.0], [0.0, 0.0], [2.0, 0.0]]), _SQUARE) == (15.0, 18.0)
+
+
+def test_junction_overlaps_close_the_loop_and_count_a_span_inside_another_as_overlap():
+    assert junction_overlaps([(9.3, 16.4), (0.0, 5.0), (4.5, 9.0)], 16.0) == pytest.approx(
+        [0.5, -0.3, 0.4]
+    )
+    # The second lies inside the first: the first runs 3 m past its start.
+    assert junction_overlaps([(0.0, 6.0), (3.0, 5.0), (6.2, 15.5)], 16.0) == pytest.approx(
+        [3.0, -1.2, -0.5]
+    )
+
+
+def test_the_overlap_table_sets_rooms_overlapping_at_a_junction_apart_per_station_count():
+    def frame(
+        room: str, stations: int, span: tuple[float, float] | None, right: bool
+    ) -> FrameChain:
+        return FrameChain(room, "wide", "f", 0.0, 0.0, right, span, stations, 16.0)
+
+    rows = [
+        # one station, overlaps of 0.1 m: right
+        frame("a", 1, (0.0, 8.1), True), frame("a", 1, (8.0, 16.1), True),
+        # two stations, 2 m of overlap: wrong; a chain strayed (no span) is left out
+        frame("b", 2, (0.0, 10.0), False), frame("b", 2, (8.0, 16.0), False),
+        frame("b", 2, None, False),
+        # two stations, 0.5 m of overlap: right
+        frame("c", 2, (0.0, 8.5), True), frame("c", 2, (8.0, 16.0), True),
+    ]  # fmt: skip
+    table = overlap_table(rows).splitlines()
+    assert table[2] == "| 1 | 1 | 1 | 0 | 0 of 0 | 1 of 1 | 0.10 |"
+    assert table[3] == "| 2 | 2 | 1 | 1 | 0 of 1 | 1 of 1 | 1.25 |"
+    assert BIG_OVERLAP == 0.6
