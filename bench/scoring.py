@@ -22,7 +22,7 @@ from services.pipeline import fragment_pose
 from services.placement import Piece, PlacementCandidate, translations_of
 from services.placement.priors import chain_placement
 from services.refinement import refine_translations
-from services.types import LocalLayout
+from services.types import FloatArray, LocalLayout
 
 __all__ = [
     "add_params_option",
@@ -30,6 +30,7 @@ __all__ = [
     "candidate_result",
     "chain_error_in_plan",
     "chain_on_truth",
+    "chain_samples",
     "fit_logistic",
     "fit_logit_map",
     "fit_logit_shift",
@@ -254,6 +255,18 @@ def add_params_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def chain_samples(chain: FloatArray, per_wall: int) -> FloatArray:
+    """(S, 2) points along a (K, 2) chain's walls, ``per_wall`` evenly from each wall's
+    start to its end (both included).
+
+    >>> chain_samples(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0]]), 3).tolist()
+    [[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [2.0, 0.0], [2.0, 0.5], [2.0, 1.0]]
+    """
+    share = np.linspace(0.0, 1.0, per_wall)[None, :, None]
+    points: FloatArray = chain[:-1, None, :] + share * (chain[1:] - chain[:-1])[:, None, :]
+    return points.reshape(-1, 2)
+
+
 def chain_on_truth(
     estimated_local: Any, fragment: Mapping[str, Any], tolerance: float = 0.15
 ) -> bool:
@@ -271,9 +284,7 @@ def chain_on_truth(
     pose = np.asarray(fragment["pose"], dtype=np.float64)
     true_local = np.asarray(fragment["keypoints_local"], dtype=np.float64).reshape(-1, 3)
     plan, true = ((k @ pose[:3, :3].T + pose[:3, 3])[:, :2] for k in (est, true_local))
-    share = np.linspace(0.0, 1.0, 21)[None, :, None]  # 21 points along each wall
-    points = (plan[:-1, None, :] + share * (plan[1:] - plan[:-1])[:, None, :]).reshape(-1, 2)
-    return bool(np.all(distance_to_chain(points, true) <= tolerance))
+    return bool(np.all(distance_to_chain(chain_samples(plan, 21), true) <= tolerance))
 
 
 def chain_error_in_plan(estimated_local: Any, fragment: Mapping[str, Any]) -> float:

@@ -36,6 +36,7 @@ import numpy as np
 from bench.outside.clouds import boundary_project, perimeter_cum
 from bench.outside.run import Job, frame_jobs
 from bench.outside.score import true_fragments
+from bench.scoring import chain_samples
 from cli.frames import read_frame_dir
 from schemas.params import PipelineParams
 from services.fragments import fragment_layout
@@ -98,17 +99,10 @@ def chain_strays(chain: FloatArray, polygon: FloatArray) -> tuple[float, float]:
     >>> chain_strays(np.array([[1.0, 0.5], [3.0, 0.5]]), square)
     (0.0, 0.5)
     """
-    points = _chain_samples(chain)
+    points = chain_samples(chain, _SAMPLES)
     distance = distance_to_polygon(points, polygon)
     inside = points_in_polygon(points, polygon)
     return float(distance[~inside].max(initial=0.0)), float(distance[inside].max(initial=0.0))
-
-
-def _chain_samples(chain: FloatArray) -> FloatArray:
-    """(S, 2) points along a chain's walls, ``_SAMPLES`` per wall."""
-    t = np.linspace(0.0, 1.0, _SAMPLES)[None, :, None]
-    steps = (chain[1:] - chain[:-1])[:, None, :]
-    return (chain[:-1, None, :] + t * steps).reshape(-1, 2)
 
 
 def chain_span(chain: FloatArray, polygon: FloatArray) -> tuple[float, float]:
@@ -125,7 +119,7 @@ def chain_span(chain: FloatArray, polygon: FloatArray) -> tuple[float, float]:
     """
     cum, _ = perimeter_cum(polygon)
     perimeter = float(cum[-1])
-    _, position = boundary_project(_chain_samples(chain), polygon, cum)
+    _, position = boundary_project(chain_samples(chain, _SAMPLES), polygon, cum)
     turned = np.unwrap(position * (2.0 * np.pi / perimeter)) * (perimeter / (2.0 * np.pi))
     start = float(turned.min()) % perimeter
     return round(start, 9), round(start + float(turned.max() - turned.min()), 9)
