@@ -41,6 +41,10 @@ use tune seeds (2000 and up: 1000-1999 are held out) and, with ``--shapes``, the
 tune split. The two runs share the machine's two cores. It prints the map and what it does
 to those rooms at the closing threshold.
 
+``--fit-stations`` fits ``frame_station_slope`` instead (the logit's change per station
+beyond two that a main room's cameras stand at), on the generator's rooms and, with
+``--overlap``, also on rooms overlapping that much; use tune seeds.
+
 ``--anatomy`` tells what limits the frames instead: each frame laid out on its own (no
 merging), every scene's placement is classed by :func:`bench.tune_placement.limit_of`:
 ranked first, energy (a right room found but ranked lower), search, or chains (no right room
@@ -50,6 +54,7 @@ can be built from these chains).
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 import statistics
 import sys
@@ -75,10 +80,15 @@ from bench.scoring import (  # noqa: E402
 from bench.tune_placement import LIMITS, limit_of, scene_candidates  # noqa: E402
 from bench.world_scenes import BUCKETS, CachedScene, bucket_of  # noqa: E402
 from schemas.params import PipelineParams  # noqa: E402
-from services.confidence import view_beyond_kinect, view_top_below_fitted  # noqa: E402
+from services.confidence import (  # noqa: E402
+    FITTED_STATIONS,
+    view_beyond_kinect,
+    view_top_below_fitted,
+)
 from services.evaluation import evaluate_result  # noqa: E402
 from services.fragments import fragment_layout  # noqa: E402
 from services.pipeline import align_fragments  # noqa: E402
+from services.stations import station_count  # noqa: E402
 from services.synthetic.render import (  # noqa: E402
     CAMERAS,
     FrameScene,
@@ -184,16 +194,18 @@ def run(
 ) -> dict[str, Any]:
     """Local and global figures over ``n_scenes`` frame scenes from ``first_seed``, seen by
     ``CAMERAS[camera]`` (held as ``stance`` says, :func:`_scenes`); ``"confidences"``,
-    ``"right"``, ``"views"`` and ``"tops"`` list each main room's confidence, verdict, its
-    frames' view beyond the kinect's (:func:`services.confidence.view_beyond_kinect`) and
-    their view's top below the fitted (:func:`~services.confidence.view_top_below_fitted`),
-    radians; ``"buckets"`` maps a
+    ``"right"``, ``"views"``, ``"tops"`` and ``"stations"`` list each main room's confidence,
+    verdict, its frames' view beyond the kinect's
+    (:func:`services.confidence.view_beyond_kinect`), their view's top below the fitted
+    (:func:`~services.confidence.view_top_below_fitted`), radians, and the stations its
+    cameras stand at beyond ``FITTED_STATIONS`` (:func:`result_stations`); ``"buckets"`` maps a
     frame-count bucket ("4-5") to its rooms' ``[right, said closed, closed and right, rooms]``."""
     local, global_ok, rotation, translation, frames, statuses = [], [], [], [], [], []
     confidences: list[float] = []
     right: list[bool] = []
     views: list[float] = []
     tops: list[float] = []
+    stations: list[float] = []
     clock = LayoutClock()
     buckets: dict[str, list[int]] = {}
     skipped = 0
@@ -214,6 +226,8 @@ def run(
             tops.append(
                 view_top_below_fitted([v.view_top for v in laid_out if v.view_top is not None])
             )
+            reach = params.placement.station_reach
+            stations.append(max(0, result_stations(result, reach) - FITTED_STATIONS))
         local += list(report.local_correct.values())
         global_ok.append(report.global_correct)
         statuses.append(result["status"])
@@ -248,6 +262,7 @@ def run(
         "right": right,
         "views": views,
         "tops": tops,
+        "stations": stations,
         "buckets": buckets,
     }
 
@@ -257,6 +272,18 @@ def _median_ms(values: list[float]) -> tuple[float, float]:
     if not values:
         return math.nan, math.nan
     return 1000 * statistics.median(values), 1000 * float(np.percentile(values, 90))
+
+
+def result_stations(result: Mapping[str, Any], reach: float) -> int:
+    """How many stations a result's placed frames stand at
+    (:func:`services.stations.station_count`): a frame's camera is its local origin, so it
+    stands where its pose's translation says."""
+    cameras = [
+        np.asarray(f["pose"], dtype=np.float64)[None, :2, 3]
+        for f in result.get("fragments", [])
+        if f.get("pose") is not None
+    ]
+    return station_count(cameras, reach)
 
 
 def _row(name: str, r: dict[str, Any]) -> str:
@@ -308,6 +335,11 @@ def main() -> None:
         action="store_true",
         help="fit frame_view_top_slope on rooms seen from --pitch (steeper than the generator)",
     )
+    parser.add_argument(
+        "--fit-stations",
+        action="store_true",
+        help="fit frame_station_slope (with --overlap: also on rooms overlapping that much)",
+    )
     parser.add_argument("--anatomy", action="store_true", help="what limits each scene")
     parser.add_argument(
         "--camera",
@@ -334,15 +366,12 @@ def main() -> None:
     args = parser.parse_args()
     params = params_with(args.set)
     cameras = args.camera or ["kinect"]
-    stance: dict[str, Any] = {}
-    if args.pitch:
-        stance["pitch_deg"] = tuple(args.pitch)
-    if args.roll is not None:
-        stance["roll_deg"] = args.roll
-    if args.overlap is not None:
-        stance["gap_range"] = (-args.overlap, FrameSpec().gap_range[1])
+    stance = _stance(args)
     if stance and (args.fit or args.anatomy):
         parser.error("--pitch, --roll and --overlap apply to the table and --fit-view-top only")
+    if args.fit_stations:
+        _fit_stations(args.scenes, args.seed, args.shapes, params, cameras, stance)
+        return
     if args.fit_view_top:
         if not args.pitch:
             parser.error("--fit-view-top needs --pitch (views steeper than the fitted)")
@@ -356,6 +385,18 @@ def main() -> None:
             _anatomy(args.scenes, args.seed, args.shapes, params, camera)
         else:
             _table(args.scenes, args.seed, args.shapes, params, camera, stance)
+
+
+def _stance(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``FrameSpec`` fields the options hold the cameras by (none: the generator's)."""
+    stance: dict[str, Any] = {}
+    if args.pitch:
+        stance["pitch_deg"] = tuple(args.pitch)
+    if args.roll is not None:
+        stance["roll_deg"] = args.roll
+    if args.overlap is not None:
+        stance["gap_range"] = (-args.overlap, FrameSpec().gap_range[1])
+    return stance
 
 
 def _table(
@@ -483,6 +524,34 @@ def _fit_view_top(
         tops += r["tops"]
     slope, summary = fit_logit_shift(confidences, right, tops)
     print(f"frame_view_top_slope = {slope:.3f}: {summary}")
+
+
+def _fit_stations(
+    n_scenes: int,
+    first_seed: int,
+    shapes: bool,
+    params: PipelineParams,
+    cameras: list[str],
+    stance: Mapping[str, Any],
+) -> None:
+    """Fit and print ``frame_station_slope`` on synthetic (and tune-split shaped) rooms seen
+    by each of ``cameras`` as the generator holds them and, when ``stance`` says otherwise
+    (a larger overlap), so too, with the rest of the frames' map as it is."""
+    placement = params.placement.model_copy(update={"frame_station_slope": 0.0})
+    off = params.model_copy(update={"placement": placement})
+    outlines = frame_outlines("tune") if shapes else []
+    confidences: list[float] = []
+    right: list[bool] = []
+    beyond: list[float] = []
+    for held in [{}, stance] if stance else [{}]:
+        for camera in cameras:
+            measure = functools.partial(run, stance=held)
+            for r in side_by_side(measure, n_scenes, first_seed, outlines, off, camera).values():
+                confidences += r["confidences"]
+                right += r["right"]
+                beyond += r["stations"]
+    slope, summary = fit_logit_shift(confidences, right, beyond)
+    print(f"frame_station_slope = {slope:.3f}: {summary}")
 
 
 def cached_scenes(

@@ -15,8 +15,10 @@ room's probability is a logistic function of its share and of those, fitted on t
 benchmark's tune split. Chains resting on less evidence than those clouds had (RGB-D frames:
 wrong about one in four against one in thirteen; clouds of under 15 000 points) fail in
 ways no placement term sees, so rooms of them get a second, linear map of that logit per
-kind, fitted on tune seeds of the frames and the other-scanners benchmarks. The other rooms
-share what is left in proportion to their shares, none likelier than the main room.
+kind, fitted on tune seeds of the frames and the other-scanners benchmarks. Frames whose
+refined cameras the main room stands at more stations than that map was fitted on lower it
+further (a wrong room scatters the frames of one station). The other rooms share what is
+left in proportion to their shares, none likelier than the main room.
 
 A room whose pieces the junctions leave free to slide (its length fixed only by the model
 of what cuts hide, ``room_slack``) can be the only assembly and still the wrong size: its
@@ -42,10 +44,12 @@ from services.placement import (
     translations_of,
 )
 from services.refinement import translation_spread
+from services.stations import refined_cameras, station_count
 from services.types import Evidence, FloatArray
 
 __all__ = [
     "CALIBRATION_FEATURES",
+    "FITTED_STATIONS",
     "KINECT_VIEW",
     "Assembly",
     "calibration_features",
@@ -70,6 +74,10 @@ _WIDEST_FITTED_VIEW = 2.08
 CALIBRATION_FEATURES = (
     "bias", "logit share", "pieces", "closure", "conflict", "turns", "truncated",
 )  # fmt: skip
+# Stations a main room's cameras may stand at before frame_station_slope lowers its
+# confidence: the frames' map was fitted on rooms seen from 1-3 stations, and rooms of one or
+# two were right as often as it says.
+FITTED_STATIONS = 2
 _SHARE_CLIP = 1e-4
 _RIGHT_SHARE = 0.05  # the paper's test: mean keypoint error under 5 % of the diagonal
 
@@ -241,7 +249,7 @@ def rank_assemblies(
     main = order[0]
     inputs = calibration_features(float(shares[main]), firsts[main], free, not placement.exhaustive)
     z = float(np.asarray(params.confidence_coefficients) @ inputs)
-    z += _evidence_shift(pieces, z, params)
+    z += _evidence_shift(pieces, z, params, _stations(pieces, firsts[main], placement, params))
     confidence = 1.0 / (1.0 + math.exp(-z))
     # A room whose size the junctions leave loose is a guess the calibration does not see.
     slack = room_slack(pieces, firsts[main], polygons[main], placement.measured, params, sigmas)
@@ -288,13 +296,27 @@ def _runner_up(shares: FloatArray, main: int, g: int, confidence: float) -> floa
     return min(left, confidence * float(shares[g]) / max(float(shares[main]), 1e-12))
 
 
-def _evidence_shift(pieces: Sequence[Piece], z: float, params: PlacementParams) -> float:
+def _stations(
+    pieces: Sequence[Piece], main: PlacementCandidate, placement: Placement, params: PlacementParams
+) -> int:
+    """How many stations the main room's refined cameras stand at (0 without cameras)."""
+    if not any(len(p.cameras) for p in pieces):
+        return 0
+    cameras = refined_cameras(main, pieces, placement.measured, params)
+    return station_count(cameras, params.station_reach)
+
+
+def _evidence_shift(
+    pieces: Sequence[Piece], z: float, params: PlacementParams, stations: int = 0
+) -> float:
     """The change of the main room's logit ``z`` for pieces resting on less than the
     calibration's clouds: each kind's map a + b z, in the share of the pieces of that kind.
     With a slope under 1 a map also lifts the lowest confidences a little (below a / (1 - b):
     about 0.11 for frames, 0.03 for thin clouds), as the fit found them. Frames' rooms also
     move by ``frame_view_slope`` per radian their cameras see across beyond the kinect's,
-    and by ``frame_view_top_slope`` per radian their views' tops lie below the fitted."""
+    by ``frame_view_top_slope`` per radian their views' tops lie below the fitted, and by
+    ``frame_station_slope`` per station of the main room's cameras beyond
+    ``FITTED_STATIONS``."""
     maps: dict[Evidence, tuple[float, float]] = {
         "frame": params.frame_calibration,
         "thin_cloud": params.thin_cloud_calibration,
@@ -307,6 +329,7 @@ def _evidence_shift(pieces: Sequence[Piece], z: float, params: PlacementParams) 
     wider = view_beyond_kinect([p.view_angle for p in frames if p.view_angle is not None])
     below = view_top_below_fitted([p.view_top for p in frames if p.view_top is not None])
     shift += share * params.frame_view_slope * wider
+    shift += share * params.frame_station_slope * max(0, stations - FITTED_STATIONS)
     return shift + share * params.frame_view_top_slope * below
 
 

@@ -18,6 +18,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import replace
 
 import numpy as np
+from scipy.sparse.csgraph import connected_components
 
 from schemas.params import PlacementParams
 from services.placement import Piece, Placement, PlacementCandidate, translations_of
@@ -25,7 +26,14 @@ from services.placement.priors import SiteHints
 from services.refinement import placed_cameras, prior_anchors, refine_translations
 from services.types import FloatArray
 
-__all__ = ["counts_stations", "station_cost", "with_station_cost", "with_station_scored"]
+__all__ = [
+    "counts_stations",
+    "refined_cameras",
+    "station_cost",
+    "station_count",
+    "with_station_cost",
+    "with_station_scored",
+]
 
 
 def station_cost(cameras: Sequence[FloatArray], reach: float, spread: float) -> float:
@@ -98,12 +106,38 @@ def with_station_scored(
     """
     if cand.missing:
         return cand
+    cameras = refined_cameras(cand, pieces, measured, params, hints)
+    cost = station_cost(cameras, params.station_reach, params.station_spread)
+    features = {**cand.features, "stations": cost}
+    return replace(cand, energy=cand.energy + params.station_weight * cost, features=features)
+
+
+def refined_cameras(
+    cand: PlacementCandidate,
+    pieces: Sequence[Piece],
+    measured: Mapping[tuple[str, str], float] | None,
+    params: PlacementParams,
+    hints: SiteHints | None = None,
+) -> list[FloatArray]:
+    """Per piece of a complete candidate (loop order), (C, 2) its cameras in the site frame
+    once the loop is refined (measured, hints: as :func:`with_station_scored` takes them)."""
     by_id = {p.id: p for p in pieces}
     ordered = [by_id[fid] for fid in cand.order]
     start = translations_of(pieces, cand)
     anchors = prior_anchors(hints, cand, start) if hints is not None else []
     refined = refine_translations(ordered, cand.rotations, start, params, measured, anchors)
-    cameras = placed_cameras(ordered, cand.rotations, refined.translations)
-    cost = station_cost(cameras, params.station_reach, params.station_spread)
-    features = {**cand.features, "stations": cost}
-    return replace(cand, energy=cand.energy + params.station_weight * cost, features=features)
+    return placed_cameras(ordered, cand.rotations, refined.translations)
+
+
+def station_count(cameras: Sequence[FloatArray], reach: float) -> int:
+    """How many stations the placed cameras stand at: groups of cameras linked by steps
+    shorter than ``reach`` (m); 0 without cameras.
+
+    >>> station_count([np.zeros((1, 2)), np.array([[0.3, 0.0], [4.0, 0.0]])], 0.6)
+    2
+    """
+    points = np.concatenate([np.zeros((0, 2)), *cameras])
+    if not len(points):
+        return 0
+    near = np.linalg.norm(points[:, None, :] - points[None, :, :], axis=2) < reach
+    return int(connected_components(near, directed=False)[0])

@@ -11,6 +11,7 @@ import pytest
 
 from bench.rgbd_frames import (
     LayoutClock,
+    _fit_stations,
     _fit_view_top,
     _row,
     _scenes,
@@ -18,6 +19,7 @@ from bench.rgbd_frames import (
     cached_scenes,
     limits,
     merged_truth,
+    result_stations,
     run,
 )
 from bench.tune_placement import LIMITS, main
@@ -163,3 +165,25 @@ def test_a_merged_groups_frames_are_judged_against_the_stretch_the_group_saw(
         np.testing.assert_allclose(np.asarray(judged[fid]["keypoints_local"])[:, :2], union)
         assert judged[fid]["diagonal"] >= float(np.linalg.norm(np.ptp(union, axis=0)))
     assert judged["alone"] == alone  # an unmerged frame keeps its own
+
+
+def test_a_results_stations_are_where_its_frames_poses_stand() -> None:
+    def placed(x: float, y: float) -> dict[str, Any]:
+        pose = np.eye(4)
+        pose[:2, 3] = x, y
+        return {"id": f"f{x}{y}", "pose": pose.tolist()}
+
+    fragments = [placed(0.0, 0.0), placed(0.2, 0.1), placed(3.0, 0.0), {"id": "open", "pose": None}]
+    assert result_stations({"fragments": fragments}, 0.6) == 2
+    assert result_stations({"fragments": fragments[:2]}, 0.6) == 1
+    assert result_stations({"status": "failed", "fragments": []}, 0.6) == 0
+
+
+def test_the_stations_slope_is_fitted_on_rooms_overlapping_as_told(capsys) -> None:
+    figures = run(1, 2000, stance={"gap_range": (-2.0, 0.3)})
+    assert len(figures["stations"]) == len(figures["confidences"])
+    assert all(beyond >= 0 for beyond in figures["stations"])
+    _fit_stations(1, 2000, False, PipelineParams(), ["kinect"], {"gap_range": (-2.0, 0.3)})
+    line = capsys.readouterr().out
+    assert line.startswith("frame_station_slope = ") and "of 2 main rooms" in line
+    assert float(line.split("= ")[1].split(":")[0]) <= 0.0

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from services.confidence import (
+    FITTED_STATIONS,
     KINECT_VIEW,
     rank_assemblies,
     room_slack,
@@ -295,3 +296,22 @@ def test_priors_that_pin_a_loose_rooms_pieces_lift_its_cap():
     assert both[0].probability > cap
     one = rank_assemblies(pieces, placement, GEOMETRY, {ids[1]: 0.05})
     assert one[0].probability == pytest.approx(cap)
+
+
+def test_frames_whose_cameras_scatter_over_more_stations_than_fitted_lower_the_logit(l_room):
+    pieces, placement, _ = _ranked(l_room, [1.0, 9.5, 12.5, 20.0])
+    params = GEOMETRY.model_copy(
+        update={"frame_calibration": (-1.0, 0.5), "frame_station_slope": -2.0}
+    )
+    plain = _main_logit(pieces, placement, params, 2)
+    # Each frame's camera at its own source: the four sources lie metres apart, so the
+    # main room's cameras stand at four stations, two more than the map was fitted on.
+    at_sources = [dataclasses.replace(p, cameras=np.zeros((1, 2))) for p in pieces]
+    scattered = _main_logit(at_sources, placement, params, 2)
+    assert scattered == pytest.approx(plain + 0.5 * -2.0 * (4 - FITTED_STATIONS))
+    # Two stations (the first two pieces' cameras only) are what the map was fitted on.
+    two = [
+        dataclasses.replace(p, cameras=np.zeros((1, 2))) if k < 2 else p
+        for k, p in enumerate(pieces)
+    ]
+    assert _main_logit(two, placement, params, 2) == pytest.approx(plain)

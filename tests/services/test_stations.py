@@ -12,7 +12,13 @@ from schemas.params import PlacementParams
 from services.placement import Piece, place_pieces, rot90, translations_of
 from services.placement.priors import PiecePrior, SiteHints
 from services.refinement import placed_cameras, prior_anchors, refine_translations
-from services.stations import station_cost, with_station_cost, with_station_scored
+from services.stations import (
+    refined_cameras,
+    station_cost,
+    station_count,
+    with_station_cost,
+    with_station_scored,
+)
 from tests.conftest import chains_from_polygon
 
 pytestmark = pytest.mark.timeout(60)
@@ -105,3 +111,27 @@ def test_prior_poses_anchor_the_refinement_a_station_term_is_measured_on() -> No
     assert not refined.strays[1]
     assert anchored.features["stations"] == pytest.approx(station_cost(cameras, 0.6, 0.3))
     assert anchored.features["stations"] > 10 * loose.features["stations"]
+
+
+def test_a_station_counts_cameras_linked_by_short_steps() -> None:
+    cameras = [np.array([[0.0, 0.0], [0.5, 0.0]]), np.array([[1.0, 0.0]]), np.zeros((0, 2))]
+    assert station_count(cameras, 0.6) == 1  # a chain of steps under the reach is one
+    assert station_count(cameras, 0.45) == 3
+    assert station_count([np.array([[0.0, 0.0]]), np.array([[3.0, 0.0]])], 0.6) == 2
+    assert station_count([np.zeros((0, 2))], 0.6) == 0
+    assert station_count([], 0.6) == 0
+
+
+def test_the_refined_cameras_of_the_right_room_stand_at_its_stations() -> None:
+    pieces = _frames(STATIONS)
+    placement = place_pieces(pieces)
+    assert placement is not None
+    best = with_station_cost(placement, pieces, PlacementParams()).best
+    cameras = refined_cameras(best, pieces, placement.measured, PlacementParams())
+    # Loop order p0..p3: each piece's camera where the room's truth puts it.
+    np.testing.assert_allclose(np.vstack(cameras), STATIONS, atol=0.01)
+    assert station_count(cameras, PlacementParams().station_reach) == 2
+    # A rival turning the short walls' frames half about stands them elsewhere.
+    rival = next(c for c in placement.candidates if not c.missing and c.rotations != best.rotations)
+    scattered = refined_cameras(rival, pieces, placement.measured, PlacementParams())
+    assert station_count(scattered, PlacementParams().station_reach) > 2
