@@ -15,10 +15,10 @@ room's probability is a logistic function of its share and of those, fitted on t
 benchmark's tune split. Chains resting on less evidence than those clouds had (RGB-D frames:
 wrong about one in four against one in thirteen; clouds of under 15 000 points) fail in
 ways no placement term sees, so rooms of them get a second, linear map of that logit per
-kind, fitted on tune seeds of the frames and the other-scanners benchmarks. Frames whose
-refined cameras the main room stands at more stations than that map was fitted on lower it
-further (a wrong room scatters the frames of one station). The other rooms share what is
-left in proportion to their shares, none likelier than the main room.
+kind, fitted on tune seeds of the frames and the other-scanners benchmarks. A main room
+whose refined cameras stand at more stations than the rooms that map was fitted on is
+doubted further: a wrong room scatters the frames of one station. The other rooms share
+what is left in proportion to their shares, none likelier than the main room.
 
 A room whose pieces the junctions leave free to slide (its length fixed only by the model
 of what cuts hide, ``room_slack``) can be the only assembly and still the wrong size: its
@@ -299,8 +299,10 @@ def _runner_up(shares: FloatArray, main: int, g: int, confidence: float) -> floa
 def _stations(
     pieces: Sequence[Piece], main: PlacementCandidate, placement: Placement, params: PlacementParams
 ) -> int:
-    """How many stations the main room's refined cameras stand at (0 without cameras)."""
-    if not any(len(p.cameras) for p in pieces):
+    """How many stations the main room's refined cameras stand at; 0 without cameras, or
+    when ``station_reach`` (0: no stations) or ``frame_station_slope`` turns it off."""
+    off = params.station_reach == 0.0 or params.frame_station_slope == 0.0
+    if off or not any(len(p.cameras) for p in pieces):
         return 0
     cameras = refined_cameras(main, pieces, placement.measured, params)
     return station_count(cameras, params.station_reach)

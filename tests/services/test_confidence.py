@@ -315,3 +315,8 @@ def test_frames_whose_cameras_scatter_over_more_stations_than_fitted_lower_the_l
         for k, p in enumerate(pieces)
     ]
     assert _main_logit(two, placement, params, 2) == pytest.approx(plain)
+    # A station reach of 0 turns stations off: no camera is anyone's station mate.
+    no_stations = params.model_copy(update={"station_reach": 0.0})
+    assert _main_logit(at_sources, placement, no_stations, 2) == pytest.approx(
+        _main_logit(pieces, placement, no_stations, 2)
+    )
