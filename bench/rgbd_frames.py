@@ -23,7 +23,9 @@ in turn (``--fit`` pools them and also fits the map's change with the view angle
 ``frame_view_slope``).
 
 ``--overlap M`` lets neighbouring frames' stretches of wall overlap by up to M meters (the
-generator's default: 0.3), as a robot turning on the spot takes them.
+generator's default: 0.3), as a robot turning on the spot takes them; ``--gap M`` leaves up to
+M meters of wall unseen between them (the generator's: 0.2), corners included, as views that
+stop short of the far walls do.
 
 ``--pitch LOW HIGH`` and ``--roll DEG`` hold the cameras otherwise than the generator does
 (5-20 degrees down, 3 of roll), e.g. ``--pitch -45 -30`` for views over a desk or floor
@@ -362,13 +364,23 @@ def main() -> None:
         help="largest overlap of neighbouring frames' stretches of wall, m (the generator's: "
         "0.3; robots turning on the spot overlap by metres)",
     )
+    parser.add_argument(
+        "--gap",
+        type=float,
+        metavar="M",
+        help="largest unseen wall between neighbouring frames' stretches, m (the generator's: "
+        "0.2; a view that stops short of a corner leaves metres, corners included, unseen)",
+    )
     add_params_option(parser)
     args = parser.parse_args()
     params = params_with(args.set)
     cameras = args.camera or ["kinect"]
     stance = _stance(args)
     if stance and (args.fit or args.anatomy):
-        parser.error("--pitch, --roll and --overlap apply to the table and --fit-view-top only")
+        parser.error(
+            "--pitch, --roll, --overlap and --gap apply to the table, --fit-view-top and "
+            "--fit-stations only"
+        )
     if args.fit_stations:
         _fit_stations(args.scenes, args.seed, args.shapes, params, cameras, stance)
         return
@@ -394,8 +406,13 @@ def _stance(args: argparse.Namespace) -> dict[str, Any]:
         stance["pitch_deg"] = tuple(args.pitch)
     if args.roll is not None:
         stance["roll_deg"] = args.roll
+    low, high = FrameSpec().gap_range
     if args.overlap is not None:
-        stance["gap_range"] = (-args.overlap, FrameSpec().gap_range[1])
+        low = -args.overlap
+    if args.gap is not None:
+        high = args.gap
+    if args.overlap is not None or args.gap is not None:
+        stance["gap_range"] = (low, high)
     return stance
 
 

@@ -12,7 +12,9 @@ the wall); wrong past ``WRONG`` metres either way. A chain cut short along the o
 passes: this finds the chains that lead a room astray, not every chain a scorer would fail.
 A second table (:func:`overlap_table`) puts each right chain on the outline's perimeter
 (:func:`chain_span`) and sets apart, per number of stations, the rooms whose neighbouring
-stretches overlap by more than :data:`BIG_OVERLAP` at a junction of their loop.
+stretches overlap by more than :data:`BIG_OVERLAP` at a junction of their loop. A third
+(:func:`unseen_table`) sets apart, of the rooms whose every chain is right, those whose
+chains leave more than :data:`BIG_UNSEEN` of the outline unseen between two of them.
 
     .venv/bin/python -m bench.outside.frame_chains --out DIR [--per-camera 20] [--seed 8]
         [--list] [--workers 2]
@@ -46,6 +48,7 @@ from services.types import FloatArray
 
 __all__ = [
     "BIG_OVERLAP",
+    "BIG_UNSEEN",
     "WRONG",
     "FrameChain",
     "chain_span",
@@ -55,12 +58,17 @@ __all__ = [
     "main",
     "overlap_table",
     "room_chains",
+    "unseen_stretches",
+    "unseen_table",
 ]
 
 WRONG = 0.3  # m: a chain straying farther from the outline is wrong
 # m: neighbours overlapping more than this at a junction are more than the brief's world
 # (up to 0.5 m) and the placement's junction model expect
 BIG_OVERLAP = 0.6
+# m: wall left unseen between neighbouring frames' chains beyond this is more than the
+# placement's junction model expects (about 0 +- 0.3 m either side of a hidden corner)
+BIG_UNSEEN = 0.6
 _SAMPLES = 40  # points per wall the strays are measured at
 
 
@@ -137,6 +145,30 @@ def junction_overlaps(spans: Sequence[tuple[float, float]], perimeter: float) ->
     return [round(end - start, 9) for (_, end), start in zip(ordered, starts, strict=True)]
 
 
+def unseen_stretches(spans: Sequence[tuple[float, float]], perimeter: float) -> list[float]:
+    """Lengths (m) of the outline's stretches no span covers, largest first (none when the
+    spans cover the whole loop). Spans as :func:`chain_span` gives them.
+
+    >>> unseen_stretches([(9.3, 16.4), (0.0, 5.0), (4.5, 9.0)], 16.0)
+    [0.3]
+    >>> unseen_stretches([(0.0, 6.0), (3.0, 5.0), (8.0, 15.0)], 16.0)
+    [2.0, 1.0]
+    """
+    if not spans:
+        return [perimeter]
+    ordered = sorted(spans)
+    reach = ordered[0][1]
+    holes = []
+    for start, end in ordered[1:]:
+        if start > reach:
+            holes.append(start - reach)
+        reach = max(reach, end)
+    wrap = ordered[0][0] + perimeter - reach  # from the last reach round to the first start
+    if wrap > 0:
+        holes.append(wrap)
+    return sorted((round(h, 9) for h in holes), reverse=True)
+
+
 def room_chains(
     folder: Path, camera: str, params: PipelineParams = PipelineParams()
 ) -> list[FrameChain]:
@@ -195,30 +227,57 @@ def overlap_table(rows: Sequence[FrameChain]) -> str:
     """Per number of stations: rooms, rooms right, and how the rooms fare whose frames
     overlap by more than :data:`BIG_OVERLAP` at a junction of the loop their right chains
     make (:func:`junction_overlaps`) against the others."""
-    by_room: dict[str, list[FrameChain]] = defaultdict(list)
-    for row in rows:
-        by_room[row.room].append(row)
-    lines = [
-        f"| stations | rooms | right | overlap > {BIG_OVERLAP} m at a junction | right of those "
-        "| right of the others | median largest overlap, m |",
-        "|---|---|---|---|---|---|---|",
-    ]
+    header = f"| stations | rooms | right | overlap > {BIG_OVERLAP} m at a junction"
+    lines = [f"{header} | right of those | right of the others | median largest overlap, m |"]
     rooms: dict[int, list[tuple[float, bool | None]]] = defaultdict(list)
-    for frames in by_room.values():
+    for frames in _by_room(rows):
         spans = [f.span for f in frames if f.span is not None]
         largest = max(junction_overlaps(spans, frames[0].perimeter)) if spans else 0.0
         rooms[frames[0].stations].append((largest, frames[0].room_right))
+    return "\n".join(lines + _station_rows(rooms, BIG_OVERLAP))
+
+
+def unseen_table(rows: Sequence[FrameChain]) -> str:
+    """Per number of stations, over the rooms whose every chain is right: how the rooms fare
+    whose chains leave more than :data:`BIG_UNSEEN` of the outline unseen at a junction of
+    their loop (:func:`unseen_stretches`: a view stopping short of a far wall, corners
+    included) against the others."""
+    header = "| stations | rooms, every chain right | right | "
+    header += f"unseen > {BIG_UNSEEN} m at a junction"
+    lines = [f"{header} | right of those | right of the others | median largest unseen, m |"]
+    rooms: dict[int, list[tuple[float, bool | None]]] = defaultdict(list)
+    for frames in _by_room(rows):
+        if all(f.span is not None for f in frames):
+            spans = [f.span for f in frames if f.span is not None]
+            holes = unseen_stretches(spans, frames[0].perimeter)
+            rooms[frames[0].stations].append((max(holes, default=0.0), frames[0].room_right))
+    return "\n".join(lines + _station_rows(rooms, BIG_UNSEEN))
+
+
+def _by_room(rows: Sequence[FrameChain]) -> list[list[FrameChain]]:
+    """The rows grouped by room, in the order rooms first appear."""
+    by_room: dict[str, list[FrameChain]] = defaultdict(list)
+    for row in rows:
+        by_room[row.room].append(row)
+    return list(by_room.values())
+
+
+def _station_rows(rooms: dict[int, list[tuple[float, bool | None]]], limit: float) -> list[str]:
+    """A table's rows per number of stations: rooms, right, those whose largest figure is
+    over ``limit`` and how many of them and of the others are right, the median figure.
+    ``rooms``: per station count, each room's (largest figure, came out right)."""
+    lines = ["|---|---|---|---|---|---|---|"]
     for stations in sorted(rooms):
         group = rooms[stations]
-        big = [right for largest, right in group if largest > BIG_OVERLAP]
-        rest = [right for largest, right in group if largest <= BIG_OVERLAP]
+        big = [right for largest, right in group if largest > limit]
+        rest = [right for largest, right in group if largest <= limit]
         lines.append(
             f"| {stations} | {len(group)} | {sum(r is True for _, r in group)} | {len(big)} | "
             f"{sum(r is True for r in big)} of {len(big)} | "
             f"{sum(r is True for r in rest)} of {len(rest)} | "
             f"{float(np.median([largest for largest, _ in group])):.2f} |"
         )
-    return "\n".join(lines)
+    return lines
 
 
 def _judge(args: tuple[Job, Path]) -> list[FrameChain]:
@@ -254,6 +313,8 @@ def main(argv: list[str] | None = None) -> int:
     print(chain_table(rows))
     print()
     print(overlap_table(rows))
+    print()
+    print(unseen_table(rows))
     return 0
 
 

@@ -11,6 +11,7 @@ import pytest
 from bench.outside import frames
 from bench.outside.frame_chains import (
     BIG_OVERLAP,
+    BIG_UNSEEN,
     WRONG,
     FrameChain,
     chain_span,
@@ -19,12 +20,19 @@ from bench.outside.frame_chains import (
     junction_overlaps,
     main,
     overlap_table,
+    unseen_stretches,
+    unseen_table,
 )
 from bench.outside.run import frame_jobs
 
 pytestmark = pytest.mark.timeout(180)
 
 _SQUARE = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]])
+
+
+def _frame(room: str, stations: int, span: tuple[float, float] | None, right: bool) -> FrameChain:
+    """A right chain (or a strayed one, span None) of a wide room on a 16 m outline."""
+    return FrameChain(room, "wide", "f", 0.0, 0.0, right, span, stations, 16.0)
 
 
 def test_a_chain_on_the_outline_strays_nowhere_and_one_past_a_corner_strays_beyond():
@@ -64,6 +72,7 @@ def test_a_draws_folder_is_judged_frame_by_frame(tmp_path: Path, capsys) -> None
     ends = [k for k, row in enumerate(rows) if row.startswith("| all |")]
     assert rows[0].startswith("| camera |") and len(ends) == 1
     assert rows[ends[0] + 1].startswith("| stations |")
+    assert sum(row.startswith("| stations | rooms, every chain right |") for row in rows) == 1
     total = json.loads((folder / "truth.json").read_text())["n_frames"]
     assert f"| wide | {total} |" in out
 
@@ -86,21 +95,42 @@ def test_junction_overlaps_close_the_loop_and_count_a_span_inside_another_as_ove
 
 
 def test_the_overlap_table_sets_rooms_overlapping_at_a_junction_apart_per_station_count():
-    def frame(
-        room: str, stations: int, span: tuple[float, float] | None, right: bool
-    ) -> FrameChain:
-        return FrameChain(room, "wide", "f", 0.0, 0.0, right, span, stations, 16.0)
-
     rows = [
         # one station, overlaps of 0.1 m: right
-        frame("a", 1, (0.0, 8.1), True), frame("a", 1, (8.0, 16.1), True),
+        _frame("a", 1, (0.0, 8.1), True), _frame("a", 1, (8.0, 16.1), True),
         # two stations, 2 m of overlap: wrong; a chain strayed (no span) is left out
-        frame("b", 2, (0.0, 10.0), False), frame("b", 2, (8.0, 16.0), False),
-        frame("b", 2, None, False),
+        _frame("b", 2, (0.0, 10.0), False), _frame("b", 2, (8.0, 16.0), False),
+        _frame("b", 2, None, False),
         # two stations, 0.5 m of overlap: right
-        frame("c", 2, (0.0, 8.5), True), frame("c", 2, (8.0, 16.0), True),
+        _frame("c", 2, (0.0, 8.5), True), _frame("c", 2, (8.0, 16.0), True),
     ]  # fmt: skip
     table = overlap_table(rows).splitlines()
     assert table[2] == "| 1 | 1 | 1 | 0 | 0 of 0 | 1 of 1 | 0.10 |"
     assert table[3] == "| 2 | 2 | 1 | 1 | 0 of 1 | 1 of 1 | 1.25 |"
     assert BIG_OVERLAP == 0.6
+
+
+def test_unseen_stretches_are_the_outline_no_span_covers_round_the_loop():
+    assert unseen_stretches([(9.3, 16.4), (0.0, 5.0), (4.5, 9.0)], 16.0) == pytest.approx([0.3])
+    # A span inside another hides nothing; the hole before the last span and the one
+    # closing the loop both count, largest first.
+    assert unseen_stretches([(0.0, 6.0), (3.0, 5.0), (8.0, 15.0)], 16.0) == pytest.approx(
+        [2.0, 1.0]
+    )
+    assert unseen_stretches([(0.0, 8.5), (8.0, 16.2)], 16.0) == []
+    assert unseen_stretches([], 16.0) == [16.0]
+
+
+def test_the_unseen_table_sets_rooms_with_wall_unseen_between_chains_apart():
+    rows = [
+        # one station, the whole loop seen: right
+        _frame("a", 1, (0.0, 8.1), True), _frame("a", 1, (8.0, 16.1), True),
+        # one station, 2 m unseen between the chains: wrong
+        _frame("b", 1, (0.0, 8.0), False), _frame("b", 1, (10.0, 16.0), False),
+        # a chain strayed (no span): left out, whatever it leaves unseen
+        _frame("c", 2, (0.0, 4.0), False), _frame("c", 2, None, False),
+    ]  # fmt: skip
+    table = unseen_table(rows).splitlines()
+    assert len(table) == 3
+    assert table[2] == "| 1 | 2 | 1 | 1 | 0 of 1 | 1 of 1 | 1.00 |"
+    assert BIG_UNSEEN == 0.6

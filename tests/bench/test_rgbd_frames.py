@@ -3,6 +3,7 @@ timed once (a merged group's as one)."""
 
 from __future__ import annotations
 
+import argparse
 import math
 from typing import Any
 
@@ -15,6 +16,7 @@ from bench.rgbd_frames import (
     _fit_view_top,
     _row,
     _scenes,
+    _stance,
     bucket_row,
     cached_scenes,
     limits,
@@ -96,6 +98,30 @@ def test_the_scenes_are_rendered_with_the_stance_asked_for() -> None:
     # the lowest top of view fitted (4 degrees above level).
     assert len(steep["tops"]) == len(steep["confidences"])
     assert all(0.1 < below < 0.32 for below in steep["tops"])
+
+
+def test_gap_leaves_metres_of_wall_unseen_between_neighbouring_frames() -> None:
+    def held(overlap: float | None, gap: float | None) -> dict[str, Any]:
+        options = argparse.Namespace(pitch=None, roll=None, overlap=overlap, gap=gap)
+        return _stance(options)
+
+    assert held(None, None) == {}
+    assert held(None, 2.5) == {"gap_range": (-0.3, 2.5)}
+    assert held(2.0, 2.5) == {"gap_range": (-2.0, 2.5)}
+    assert held(2.0, None) == {"gap_range": (-2.0, 0.2)}
+
+    def unseen(stance: dict[str, Any] | None) -> list[float]:
+        [scene] = _scenes(1, 1001, None, "kinect", stance)
+        assert scene is not None
+        ordered = sorted(scene.frames, key=lambda f: f.loop_index)
+        ends = [f.loop_end for f in ordered]
+        starts = [f.loop_start for f in ordered[1:] + ordered[:1]]
+        half = scene.perimeter / 2
+        return [(b - a + half) % (2 * half) - half for a, b in zip(ends, starts, strict=True)]
+
+    assert max(unseen(None)) <= 0.2 + 1e-6
+    wide = unseen(held(None, 2.5))
+    assert max(wide) > 1.0 and all(-0.3 - 1e-6 <= g <= 2.5 + 1e-6 for g in wide)
 
 
 def test_the_view_tops_slope_is_fitted_on_rooms_seen_steeply(capsys) -> None:
