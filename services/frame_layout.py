@@ -54,9 +54,6 @@ _FLOOR_BAND = 0.05  # m, points this close to the floor height lie on the floor
 _MIN_FLOOR_POINTS = 50
 _MIN_HEIGHT, _MAX_HEIGHT = 0.2, 2.5  # m, camera heights over a floor that can be one
 _MAX_EXTENSION = 3.0  # m, farthest a chain end is moved out to the frustum's edge
-_STANDING = 0.1  # m, points this far above the floor (and below the ceiling) stand on it
-_RUN_READINGS = 10  # standing points in a run's directions: readings came back from there
-_END_OWN_REACH = 0.15  # m, a chain end's own wall points lie this far along the run at most
 _MIN_TURN = 0.3  # m, least length of a wall the chain's last wall turns onto (a reveal is less)
 _ON_LINE = 0.1  # m, a keypoint this close to a wall's line lies on it
 _SEED_PLANES = 2  # planes peeled off when looking for the floor's normal
@@ -536,10 +533,7 @@ def _wall_across(
 
 
 def _to_frustum_edges(
-    keypoints: FloatArray,
-    lines: Sequence[WallLine],
-    views: Sequence[CameraView],
-    standing: FloatArray,
+    keypoints: FloatArray, lines: Sequence[WallLine], views: Sequence[CameraView]
 ) -> FloatArray:
     """Chain ends moved out along their walls to where the frustum's edges cut them.
 
@@ -548,15 +542,11 @@ def _to_frustum_edges(
     frame's chain starts at that edge). The move stops where a seen wall of the other axis
     meets the line on the way (the wall turns there; a door's reveal does not count), and is
     refused where the line would run through more than 2 m of space seen on both sides (the room
-    opens up there), the WE-graph's limit for an edge (services.wall_graph), and where the
-    camera saw nothing standing in the directions of the wall's run up to that edge
-    (:func:`_readings_toward`): no reading came back from there, out of range, so where the
-    wall ends is not known. Nothing scanned on the room's side is no reason to stop: a
-    wardrobe hides that strip as well (refusing those moves cost 9 points of ACC_local on the
-    frames benchmark).
+    opens up there), the WE-graph's limit for an edge (services.wall_graph). Nothing
+    scanned on the room's side is no reason to stop: a wardrobe hides that strip as well
+    (refusing those moves cost 9 points of ACC_local on the frames benchmark).
 
     keypoints: (K, 2) float64, aligned frame, source (right of the camera) to target (left).
-    standing: (M, 2) floor-plan positions of the frame's points above the floor.
     """
     out = keypoints.copy()
     for side, (end, inner) in enumerate(((0, 1), (-1, -2))):
@@ -575,45 +565,9 @@ def _to_frustum_edges(
             along = max((turn - start) * float(np.sign(outward[line.axis])), 0.0)
             moved = keypoints[end] + along * outward
             stop = float(moved[line.axis])
-        if line.crossing_gap(start, stop) <= MAX_DOORWAY and _readings_toward(
-            keypoints[end], moved, views, standing
-        ):
+        if line.crossing_gap(start, stop) <= MAX_DOORWAY:
             out[end] = moved
     return out
-
-
-def _readings_toward(
-    end: FloatArray, moved: FloatArray, views: Sequence[CameraView], standing: FloatArray
-) -> bool:
-    """Whether readings came back from the directions of a wall's run from ``end`` to
-    ``moved`` (2,): a camera saw something standing there, past the end's own wall points,
-    nearer than the run (furniture hiding it), on it (the wall's sparse points) or beyond it
-    (through a door or a window in it). Nothing there means no reading came back from those
-    directions (all out of range): the camera cannot tell where the wall ends. standing:
-    (M, 2) floor-plan positions of the frame's points above the floor."""
-    run = moved - end
-    length = float(np.linalg.norm(run))
-    if length <= _END_OWN_REACH:
-        return True  # nothing to tell: the end is at the edge already
-    start = end + _END_OWN_REACH * run / length  # past the end's own wall points
-    for view in views:
-        centre = view.centre[:2]
-        turn = float(np.sign(_side_of(centre, start, moved[None])[0]))
-        ahead = (standing - centre) @ (0.5 * (start + moved) - centre) > 0
-        within = (
-            ahead
-            & (turn * _side_of(centre, start, standing) >= 0)
-            & (turn * _side_of(centre, moved, standing) <= 0)
-        )
-        if np.count_nonzero(within) >= _RUN_READINGS:
-            return True
-    return False
-
-
-def _side_of(a: FloatArray, b: FloatArray, points: FloatArray) -> FloatArray:
-    """(M,) which side of the line from a to b each (M, 2) point lies on (signed area)."""
-    side: FloatArray = (b[0] - a[0]) * (points[:, 1] - a[1]) - (b[1] - a[1]) * (points[:, 0] - a[0])
-    return side
 
 
 def _wall_around_opening(
@@ -779,11 +733,7 @@ def estimate_frame_layout(
             cameras=centres,
             view_ranges=ranges,
         )
-    above = (aligned[:, 2] > frame.floor_z + _STANDING) & (
-        aligned[:, 2] < (np.inf if frame.ceiling_z is None else frame.ceiling_z - _STANDING)
-    )
-    kp = _without_furniture(chain.keypoints, lines)
-    kp = _to_frustum_edges(kp, lines, views, aligned[above, :2])
+    kp = _to_frustum_edges(_without_furniture(chain.keypoints, lines), lines, views)
     # An end wall's length is known once it reaches the view's edge.
     kp = _drop_end_sides(kp, views, aligned, frame.floor_z)
     if len(kp) == 2 and len(views) == 1:

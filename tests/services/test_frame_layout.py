@@ -233,17 +233,6 @@ def test_the_wall_seen_just_past_a_protruding_corner_keeps_the_recess(
     np.testing.assert_allclose(world[1:-1, :2], corners, atol=0.08)
 
 
-def test_a_wall_seen_until_the_depth_runs_out_is_not_run_on_to_the_views_edge() -> None:
-    # The camera looks down a 9 m wall (y = 0) obliquely; its readings stop 7 m out, about
-    # 0.25 m short of the room's corner (x = 1.9), and none come back from past there (the
-    # other wall is out of range too). The view's edge crosses the wall's line 0.4 m past
-    # that corner: the chain ends where the readings do, not out there, beyond the room.
-    room = Room.from_polygon(np.array([[1.9, 0.0], [11.0, 0.0], [11.0, 6.0], [1.9, 6.0]]), 2.6)
-    world = _world_chain(room, Furnishing(), ((9.5, 3.5, 1.3), 234.9, -5.0))
-    np.testing.assert_allclose(world[:, 1], 0.0, atol=0.05)
-    assert 1.85 <= world[:, 0].min() <= 2.5
-
-
 def test_a_frames_seen_space_reaches_back_to_its_camera() -> None:
     # A level camera sees the floor only a few meters out; its rays crossed the space
     # before that, and the placement must keep other frames' walls out of it too.
