@@ -45,7 +45,7 @@ to those rooms at the closing threshold.
 
 ``--fit-stations`` fits ``frame_station_slope`` instead (the logit's change per station
 beyond two that a main room's cameras stand at), on the generator's rooms and, with
-``--overlap``, also on rooms overlapping that much; use tune seeds.
+``--overlap`` or ``--gap``, also on rooms held that way; use tune seeds.
 
 ``--anatomy`` tells what limits the frames instead: each frame laid out on its own (no
 merging), every scene's placement is classed by :func:`bench.tune_placement.limit_of`:
@@ -340,7 +340,7 @@ def main() -> None:
     parser.add_argument(
         "--fit-stations",
         action="store_true",
-        help="fit frame_station_slope (with --overlap: also on rooms overlapping that much)",
+        help="fit frame_station_slope (with --overlap or --gap: also on rooms held that way)",
     )
     parser.add_argument("--anatomy", action="store_true", help="what limits each scene")
     parser.add_argument(
@@ -553,7 +553,7 @@ def _fit_stations(
 ) -> None:
     """Fit and print ``frame_station_slope`` on synthetic (and tune-split shaped) rooms seen
     by each of ``cameras`` as the generator holds them and, when ``stance`` says otherwise
-    (a larger overlap), so too, with the rest of the frames' map as it is."""
+    (a larger overlap or gap), so too, with the rest of the frames' map as it is."""
     placement = params.placement.model_copy(update={"frame_station_slope": 0.0})
     off = params.model_copy(update={"placement": placement})
     outlines = frame_outlines("tune") if shapes else []
