@@ -196,6 +196,29 @@ class PlacementParams(_Frozen):
         description="RGB-D frames: the scale of the stations term: a camera this far from "
         "the nearest other piece's costs 0.5, m",
     )
+    end_wall_trial: float = Field(
+        1.3,
+        ge=0,
+        description="RGB-D frames: a chain's first or last wall no longer than this that "
+        "turns into the next at a convex corner may be a furniture side at the view's edge; "
+        "the site is also placed with the chain without it, one such wall at a time, and "
+        "the lower energy wins (services.end_walls); 0 turns it off, m",
+    )
+    end_wall_least_view: float = Field(
+        1.2,
+        ge=0,
+        description="RGB-D frames: the narrowest view (radians across) whose chains the "
+        "end-wall trial is given: a kinect's (1.09) lost more rooms by it than it won "
+        "(tune, held-out and outside draws: 3 won, 5 lost; realsense and wide 11 won, 2 "
+        "lost)",
+    )
+    end_wall_prior: float = Field(
+        1.0,
+        ge=0,
+        description="RGB-D frames: the energy a chain without such an end wall must gain to "
+        "be kept: a prior against the trim, since most short convex end walls are the "
+        "room's own corners (about one in four a furniture side)",
+    )
     station_view_overlap: float = Field(
         8.0,
         ge=0,

@@ -34,6 +34,7 @@ from services.confidence import (
     rank_assemblies,
     same_room,
 )
+from services.end_walls import END_WALLS, without_end_wall
 from services.fragments import Fragment, fragment_layout, fragment_points
 from services.frame_merge import (
     FrameGroup,
@@ -644,6 +645,11 @@ def place_site(
     report = progress or (lambda stage, fraction: None)
     # The search breaks near-ties on the layouts' last bits, which differ between machines.
     layouts = {fid: lay.snapped() for fid, lay in layouts.items()}
+    usable = [fid for fid, lay in layouts.items() if lay.ok]
+    report("placement", 0.1)
+    layouts, (pieces, site_hints, placement) = _without_furniture_sides(
+        layouts, usable, hints, params, _placed_site(layouts, usable, hints, params), report
+    )
     fragments = {
         fid: FragmentResultModel(
             id=fid,
@@ -652,14 +658,6 @@ def place_site(
         )
         for fid, lay in layouts.items()
     }
-    usable = [fid for fid, lay in layouts.items() if lay.ok]
-    pieces, site_hints = site_pieces(layouts, usable, hints, params.placement)
-    report("placement", 0.1)
-    placement = place_pieces(list(pieces.values()), params.placement, site_hints)
-    if placement is not None:
-        placement = with_station_cost(
-            placement, list(pieces.values()), params.placement, site_hints
-        )
     if placement is None:
         report("done", 1.0)
         return ResultModel(
@@ -726,6 +724,63 @@ def place_site(
         alternatives=[_alternative(alt, height) for alt in alternatives],
         diagnostics=diagnostics,
     )
+
+
+_PlacedSite = tuple[dict[str, Piece], SiteHints, Placement | None]
+
+
+def _placed_site(
+    layouts: Mapping[str, LocalLayout],
+    usable: Sequence[str],
+    hints: HintsModel | None,
+    params: PipelineParams,
+) -> _PlacedSite:
+    """The site's pieces, resolved hints, and placement (its kept assemblies ranked with
+    their stations term); None when no piece has a wall."""
+    pieces, site_hints = site_pieces(layouts, usable, hints, params.placement)
+    placement = place_pieces(list(pieces.values()), params.placement, site_hints)
+    if placement is not None:
+        placement = with_station_cost(
+            placement, list(pieces.values()), params.placement, site_hints
+        )
+    return pieces, site_hints, placement
+
+
+def _without_furniture_sides(
+    layouts: Mapping[str, LocalLayout],
+    usable: Sequence[str],
+    hints: HintsModel | None,
+    params: PipelineParams,
+    placed: _PlacedSite,
+    report: ProgressFn,
+) -> tuple[dict[str, LocalLayout], _PlacedSite]:
+    """The layouts and placement with each frame chain's short convex end wall dropped
+    where the site then closes with an energy lower by ``end_wall_prior``
+    (:mod:`services.end_walls`), one wall at a time, fragments in id order; a loop that
+    closes beats one that does not."""
+    kept = dict(layouts)
+    longest, least_view = params.placement.end_wall_trial, params.placement.end_wall_least_view
+    for k, fid in enumerate(sorted(usable)):
+        for end in END_WALLS:
+            variant = without_end_wall(kept[fid], end, longest, least_view)
+            if variant is None:
+                continue
+            trial = {**kept, fid: variant}
+            tried = _placed_site(trial, usable, hints, params)
+            if _closes_better(tried[2], placed[2], params.placement.end_wall_prior):
+                kept, placed = trial, tried
+            report("placement", 0.1 + 0.5 * (k + 1) / len(usable))
+    return kept, placed
+
+
+def _closes_better(tried: Placement | None, current: Placement | None, prior: float) -> bool:
+    """Whether ``tried`` closes the room and ``current`` does not, or closes it at an
+    energy lower by more than ``prior``."""
+    if tried is None or not tried.closed:
+        return False
+    if current is None or not current.closed:
+        return True
+    return tried.best.energy + prior < current.best.energy
 
 
 @dataclass(frozen=True)

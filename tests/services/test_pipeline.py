@@ -410,6 +410,53 @@ def test_tied_rooms_are_closed_with_alternatives_under_a_lower_bar():
     assert len(result.alternatives[0].floorplan.rooms) == 1
 
 
+def _framed(layouts: dict[str, LocalLayout]) -> dict[str, LocalLayout]:
+    """The layouts as frames of a camera 86 degrees across (wider than a kinect)."""
+    return {
+        fid: dataclasses.replace(lay, evidence="frame", view_angle=1.5)
+        for fid, lay in layouts.items()
+    }
+
+
+def test_a_frame_chain_ending_on_a_furniture_side_is_placed_without_it():
+    # The L room's p1 ends on a 3 m wall; a wardrobe's side (0.6 m, turning into the room)
+    # at the view's edge adds a corner the room does not have.
+    layouts = _framed(_hand_layouts([1.0, 9.5, 14.0, 20.0]))
+    ends = layouts["p1"].keypoints
+    sided = {
+        **layouts,
+        "p1": dataclasses.replace(
+            layouts["p1"], keypoints=np.vstack([ends, ends[-1] + np.array([0.0, -0.6])])
+        ),
+    }
+    exact = PlacementParams(refined_junction_mean=0.0)
+    clean = place_site(layouts, PipelineParams(placement=exact))
+    tried = place_site(sided, PipelineParams(placement=exact))
+    kept = place_site(
+        sided, PipelineParams(placement=exact.model_copy(update={"end_wall_trial": 0}))
+    )
+    p1 = {f.id: f for f in tried.fragments}["p1"]
+    assert len(p1.local_layout.keypoints) == len(ends)  # reported as placed: without it
+    assert tried.floorplan.rooms[0].polygon == clean.floorplan.rooms[0].polygon
+    assert tried.confidence == pytest.approx(clean.confidence)
+    room = np.array(kept.floorplan.rooms[0].polygon)
+    assert abs(signed_area(room) - signed_area(np.array(clean.floorplan.rooms[0].polygon))) > 1.0
+
+
+def test_a_real_short_corner_wall_at_a_frame_chain_end_is_kept():
+    # Each piece of an 8 x 5 m room ends 0.6-1 m past a corner it saw: dropping that wall
+    # would leave a turn to hide in a junction, which costs more.
+    rect = np.array([[0.0, 0.0], [8.0, 0.0], [8.0, 5.0], [0.0, 5.0]])
+    pieces = chains_from_polygon(rect, [1.0, 8.6, 16.0, 22.0], [0, 1, 2, 3])
+    frame = ManhattanFrame(rotation=np.eye(3), floor_z=0.0, ceiling_z=2.5)
+    layouts = _framed({p.id: LocalLayout(p.keypoints, frame) for p in pieces})
+    result = place_site(
+        layouts, PipelineParams(placement=PlacementParams(refined_junction_mean=0.0))
+    )
+    assert [len(f.local_layout.keypoints) for f in result.fragments] == [3, 3, 3, 3]
+    assert signed_area(np.array(result.floorplan.rooms[0].polygon)) == pytest.approx(40.0, abs=0.1)
+
+
 def test_an_order_hint_resolves_the_tie():
     layouts = _hand_layouts([1.0, 9.5, 14.0, 20.0])
     # Hand-made chains meet exactly at their cuts: a refinement expecting overlaps there
