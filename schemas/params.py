@@ -200,9 +200,10 @@ class PlacementParams(_Frozen):
         1.3,
         ge=0,
         description="RGB-D frames: a chain's first or last wall no longer than this that "
-        "turns into the next at a convex corner may be a furniture side at the view's edge; "
-        "the site is also placed with the chain without it, one such wall at a time, and "
-        "the lower energy wins (services.end_walls); 0 turns it off, m",
+        "turns off a longer wall at a convex corner may be a furniture side or front at the "
+        "view's edge; the site is also placed with the chain without it, one such wall at a "
+        "time, and keeps it so when the room then closes with an energy lower by "
+        "end_wall_prior (services.end_walls); 0 turns it off, m",
     )
     end_wall_least_view: float = Field(
         1.2,

@@ -1,13 +1,14 @@
 """A frame's short end wall that may be a furniture side: the chain with and without it.
 
 Where a frame's view ends beside a wardrobe or shelf standing against a wall, its chain can
-start or end on the furniture's side: a short wall meeting the room's wall at a convex
-corner, just as a real corner of the room would. One frame cannot tell the two apart (the
-view's top stays below the furniture's, and nothing is seen past its edge), but the loop
-can: a side taken for a corner adds a turn the room does not make, which the other pieces
-must undo with a hidden corner and a gap that does not close. So each such chain is also
-offered without that wall, and the placement keeps it so where the room then closes with an
-energy lower by ``end_wall_prior`` (most such walls are the room's own corners;
+start or end on the furniture's side (or, having turned at its edge, on its front): a short
+wall meeting the room's wall at a convex corner, just as a real corner of the room would.
+One frame cannot tell the two apart (the view's top stays below the furniture's, and
+nothing is seen past its edge), but the loop can: a side taken for a corner adds a turn
+the room does not make, which the other pieces must undo with a hidden corner and a gap
+that does not close. So each such chain is also offered without that wall, and the
+placement keeps it so where the room then closes with an energy lower by
+``end_wall_prior`` (most such walls are the room's own corners;
 :func:`services.pipeline.place_site`).
 """
 
