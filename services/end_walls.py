@@ -18,7 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from services.placement.pieces import direction_index
+from services.frame_layout import side_like
 from services.types import LocalLayout
 
 __all__ = ["END_WALLS", "without_end_wall"]
@@ -48,24 +48,21 @@ def without_end_wall(
     >>> without_end_wall(lay, "last", 1.3) is None  # 2.5 m: a wall, not a side
     True
     """
-    keypoints = layout.keypoints
-    if layout.evidence != "frame" or longest <= 0.0 or len(keypoints) < 3:
+    kp = layout.keypoints
+    if layout.evidence != "frame" or longest <= 0.0 or len(kp) < 3:
         return None
     if (layout.view_angle or 0.0) < least_view:
         return None
-    steps = np.diff(keypoints, axis=0)
-    first = end == "first"
-    wall, inner = (steps[0], steps[1]) if first else (steps[-1], steps[-2])
-    turn = (
-        direction_index(inner) - direction_index(wall)
-        if first
-        else (direction_index(wall) - direction_index(inner))
+    # The step from the end wall's corner to the chain's free end, and the wall it turns
+    # off (chain order), as the frame's own layout judges a furniture side.
+    along, step = (
+        (kp[2] - kp[1], kp[0] - kp[1]) if end == "first" else (kp[-2] - kp[-3], kp[-1] - kp[-2])
     )
-    length, beside = float(np.abs(wall).sum()), float(np.abs(inner).sum())
     # A side or front stands against a wall the view follows for longer: a short wall
     # after a shorter one is more likely the room's own jog.
-    if length > longest or turn % 4 != 1 or beside < max(_LEAST_WALL_BESIDE, 2.0 * length):
+    beside = max(_LEAST_WALL_BESIDE, 2.0 * float(np.linalg.norm(step)))
+    if not side_like(along, step, longest) or float(np.linalg.norm(along)) < beside:
         return None
-    if first:
-        return replace(layout, keypoints=keypoints[1:].copy(), source_boundary=np.zeros((0, 3)))
-    return replace(layout, keypoints=keypoints[:-1].copy(), target_boundary=np.zeros((0, 3)))
+    if end == "first":
+        return replace(layout, keypoints=kp[1:].copy(), source_boundary=np.zeros((0, 3)))
+    return replace(layout, keypoints=kp[:-1].copy(), target_boundary=np.zeros((0, 3)))

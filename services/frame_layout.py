@@ -65,7 +65,13 @@ _MIN_SURFACE_POINTS = 30  # fewer points than this make no surface (a tenth: no 
 _NEAR_CAMERA = 0.3  # m, standing surfaces closer to the camera are not looked at
 _COLUMN_DEGREES = 2.0  # bin of the view's columns a surface shows up in
 
-__all__ = ["FrameCamera", "estimate_frame_layout", "estimate_rgbd_layout", "frame_points"]
+__all__ = [
+    "FrameCamera",
+    "estimate_frame_layout",
+    "estimate_rgbd_layout",
+    "frame_points",
+    "side_like",
+]
 
 
 @dataclass(frozen=True)
@@ -403,7 +409,7 @@ def _drop_end_sides(
     """
 
     def drops(along: FloatArray, end: FloatArray, wall: FloatArray) -> bool:
-        if not _side_like(along, end, _MAX_SEEN_SIDE):
+        if not side_like(along, end, _MAX_SEEN_SIDE):
             return False
         if float(np.linalg.norm(end)) < MAX_FURNITURE_DEPTH and not _seen_high(
             wall, views, floor_z
@@ -429,7 +435,7 @@ def _drop_ends(
     return kp
 
 
-def _side_like(along: FloatArray, end: FloatArray, longest: float) -> bool:
+def side_like(along: FloatArray, end: FloatArray, longest: float) -> bool:
     """Whether an end wall (the floor-plan step ``end`` from its corner to its free end) is
     shorter than ``longest`` and than the wall ``along`` it meets (chain order), and stands
     on the room's side of that wall (its left)."""

@@ -648,7 +648,7 @@ def place_site(
     usable = [fid for fid, lay in layouts.items() if lay.ok]
     report("placement", 0.1)
     layouts, (pieces, site_hints, placement) = _without_furniture_sides(
-        layouts, usable, hints, params, _placed_site(layouts, usable, hints, params), report
+        layouts, usable, hints, params, report
     )
     fragments = {
         fid: FragmentResultModel(
@@ -751,14 +751,14 @@ def _without_furniture_sides(
     usable: Sequence[str],
     hints: HintsModel | None,
     params: PipelineParams,
-    placed: _PlacedSite,
     report: ProgressFn,
 ) -> tuple[dict[str, LocalLayout], _PlacedSite]:
-    """The layouts and placement with each frame chain's short convex end wall dropped
-    where the site then closes with an energy lower by ``end_wall_prior``
-    (:mod:`services.end_walls`), one wall at a time, fragments in id order; a loop that
-    closes beats one that does not."""
+    """The layouts and the site placed (:func:`_placed_site`), with each frame chain's
+    short convex end wall dropped where the site then closes with an energy lower by
+    ``end_wall_prior`` (:mod:`services.end_walls`), one wall at a time, fragments in id
+    order; a loop that closes beats one that does not."""
     kept = dict(layouts)
+    placed = _placed_site(kept, usable, hints, params)
     longest, least_view = params.placement.end_wall_trial, params.placement.end_wall_least_view
     for k, fid in enumerate(sorted(usable)):
         for end in END_WALLS:
