@@ -164,6 +164,20 @@ class PlacementParams(_Frozen):
     )
     hidden_corner_sigma: float = Field(0.3, gt=0, description="its spread, m")
     keypoint_sigma: float = Field(0.05, gt=0, description="noise of a chain end's position, m")
+    open_end_angle: float = Field(
+        10.0,
+        ge=0,
+        description="a single frame's chain end is open when its view continues past it by "
+        "at least this azimuth (degrees; services.open_ends): the junction there may hide "
+        "metres of wall or a step of the room. 0: no end is open",
+    )
+    open_end_sigma: float = Field(
+        1.5,
+        gt=0,
+        description="spread an open end adds to its junction's hidden displacement, per "
+        "axis, in the energy's closure and the refinement; the closed-loop gap limit allows "
+        "that much more per open end, m",
+    )
     measured_shift_sigma: float = Field(
         0.06,
         gt=0,

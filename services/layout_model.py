@@ -43,8 +43,11 @@ def _simplify(points: FloatArray, tolerance: float = 1e-3) -> FloatArray:
     return pts
 
 
-def _junction(q: FloatArray, d_in: FloatArray, p: FloatArray, d_out: FloatArray) -> FloatArray:
-    """Vertices replacing a junction from a wall ending at q to one starting at p."""
+def _junction(
+    q: FloatArray, d_in: FloatArray, p: FloatArray, d_out: FloatArray, step_late: bool = False
+) -> FloatArray:
+    """Vertices replacing a junction from a wall ending at q to one starting at p; a jog
+    between parallel walls stands at q, or with ``step_late`` at p."""
     if abs(float(d_in @ d_out)) < 0.5:
         # Perpendicular: the corner where the two wall lines meet.
         corner = np.where(np.abs(d_in) > 0.5, p, q)
@@ -53,6 +56,8 @@ def _junction(q: FloatArray, d_in: FloatArray, p: FloatArray, d_out: FloatArray)
     normal = np.array([-d_in[1], d_in[0]])
     if abs(float(normal @ (p - q))) < 1e-3:
         return np.zeros((0, 2))
+    if step_late:
+        return np.vstack([q + d_in * float(d_in @ (p - q)), p])
     return np.vstack([q, q + normal * float(normal @ (p - q))])
 
 
@@ -78,7 +83,10 @@ def build_polygon(
         vertices.append(chain[1:-1])
         d_in = _unit(chain[-1] - chain[-2])
         d_out = _unit(nxt[1] - nxt[0])
-        vertices.append(_junction(chain[-1], d_in, nxt[0], d_out))
+        # A step hides at the end whose view lost the wall (services.open_ends): the wall
+        # of the other end goes on, out of its view, up to the step.
+        step_late = pieces[(i + 1) % n].open_ends[0] and not pieces[i].open_ends[1]
+        vertices.append(_junction(chain[-1], d_in, nxt[0], d_out, step_late))
     polygon = np.vstack(vertices) if vertices else np.zeros((0, 2))
     if len(polygon) >= 4:
         polygon = _simplify(_remove_jogs(_snap_to_axes(_simplify(polygon))))

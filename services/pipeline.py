@@ -46,6 +46,7 @@ from services.frame_merge import (
 from services.geometry import is_simple_rectilinear
 from services.layout_model import build_polygon
 from services.local_layout import estimate_local_layout
+from services.open_ends import open_ends
 from services.placement import (
     Piece,
     Placement,
@@ -153,7 +154,9 @@ def site_pieces(
     mates = station_mates({fid: layouts[fid] for fid in first}, params)
     pieces = {
         fid: dataclasses.replace(
-            make_piece(fid, layouts[fid]), station_mates=tuple(sorted(mates[fid].items()))
+            make_piece(fid, layouts[fid]),
+            station_mates=tuple(sorted(mates[fid].items())),
+            open_ends=open_ends(layouts[fid], math.radians(params.open_end_angle)),
         )
         for fid in first
     }
@@ -266,12 +269,14 @@ def _gap(ordered: Sequence[Piece], cand: PlacementCandidate, translations: Float
 def _gap_limit(ordered: Sequence[Piece], cand: PlacementCandidate, params: PipelineParams) -> float:
     """Largest gap a loop may leave and still count as closed: a share of its wall length
     (at least 1 m), plus what each straight junction may hide along its wall (the
-    neighbours' overlap or gap, unseen wall at a door)."""
+    neighbours' overlap or gap, unseen wall at a door) and each open end (the wall the view
+    lost, :mod:`services.open_ends`)."""
     placement = params.placement
     loop_length = sum(p.length for p in ordered)
     straight = len(ordered) - int(cand.features.get("turns", 0.0))
     base = max(1.0, placement.max_closure_share * loop_length)
-    return base + placement.straight_junction_slack * straight
+    opened = sum(sum(p.open_ends) for p in ordered)
+    return base + placement.straight_junction_slack * straight + placement.open_end_sigma * opened
 
 
 def _to_hints_frame(

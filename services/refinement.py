@@ -152,7 +152,10 @@ def _junction_rows(
     measured walls never close a loop exactly), the paper's no-overrun and no-crossing
     inequalities, with two anchors or more (``anchors[i]`` piece i's, if any) each
     anchored source against its prior position plus the free offset of the priors' frame,
-    and each station's two cameras made to coincide (within ``station_sigma``)."""
+    and each station's two cameras made to coincide (within ``station_sigma``). A junction
+    at an open end (:mod:`services.open_ends`) spreads by ``noise.open_sigma`` more on both
+    axes, and between parallel walls is not made collinear: a step the view lost may hide
+    in it."""
     n = len(pieces)
     anchored = [(k, a) for k, a in enumerate(anchors) if a is not None]
     if len(anchored) < 2:
@@ -170,6 +173,8 @@ def _junction_rows(
         heading_out = (pieces[k].directions[0] + rotations[k]) % 4
         d_i, d_k = UNIT[heading_in], UNIT[heading_out]
         mean, var = junction_displacement(noise, heading_in, heading_out, shifts[i])
+        opened = pieces[i].open_ends[1] + pieces[k].open_ends[0]
+        var = var + opened * noise.open_sigma**2
 
         def diff(vec: FloatArray, i: int = i, k: int = k) -> FloatArray:
             """Row of vec . (t_k - t_i)."""
@@ -182,30 +187,20 @@ def _junction_rows(
             # (p + t_k) - (q + t_i) ~ mu along the axis, in units of its spread.
             j_rows.append(-diff(axis) / sigma)
             g_vals.append(float(axis @ (p - q) - mu) / sigma)
-        if np.allclose(d_i, d_k):
+        parallel = bool(np.allclose(d_i, d_k))
+        if parallel and opened:
+            continue  # the view lost the wall there: a step may hide in it
+        if parallel:
             normal = np.array([-d_i[1], d_i[0]])
-            target = float(normal @ (q - p))
             j_rows.append(-_OFFSET_WEIGHT * diff(normal))
-            g_vals.append(-_OFFSET_WEIGHT * target)
-            a_rows.append(diff(normal))  # offsets equal, within the slack
-            bounds.append((target - _OFFSET_SLACK, target + _OFFSET_SLACK, False))
-            longest = max(np.linalg.norm(q - q_prev), np.linalg.norm(p_next - p))
-            a_rows.append(diff(d_i))  # no overrun
-            bounds.append((float(longest + _MARGIN - d_i @ (p_next - q_prev)), np.inf, True))
-        elif abs(d_i @ d_k) < 0.5:
-            a_rows.append(diff(d_i))  # q stays before the next wall's line
-            bounds.append((float(d_i @ (q - p) + _MARGIN), np.inf, True))
-            a_rows.append(diff(d_k))  # p starts past this wall's line
-            bounds.append((float(d_k @ (q - p) + _MARGIN), np.inf, True))
-    for piece, anchor in anchored:
-        weight = 1.0 / max(anchor.sigma, 1e-6)
-        for c in range(2):
-            # (t + x + offset - prior) / sigma along coordinate c, for the piece's source.
-            row = np.zeros(dim)
-            row[2 * piece + c] = row[2 * n + c] = weight
-            j_rows.append(row)
-            g_vals.append(float(anchor.position[c] - sites[piece][0][c]) * weight)
-    for row, value in _station_rows(sites, stations, station_sigma, dim):
+            g_vals.append(-_OFFSET_WEIGHT * float(normal @ (q - p)))
+        for vec, low, high, ordering in _junction_bounds(q_prev, q, p, p_next, d_i, d_k):
+            a_rows.append(diff(vec))
+            bounds.append((low, high, ordering))
+    for row, value in [
+        *_anchor_rows(sites, anchored, dim),
+        *_station_rows(sites, stations, station_sigma, dim),
+    ]:
         j_rows.append(row)
         g_vals.append(value)
     gauge = np.zeros((2, dim))
@@ -220,6 +215,49 @@ def _junction_rows(
         hi=np.array(highs),
         ordering=np.array([b[2] for b in bounds] + [False, False], dtype=bool),
     )
+
+
+def _junction_bounds(
+    q_prev: FloatArray,
+    q: FloatArray,
+    p: FloatArray,
+    p_next: FloatArray,
+    d_i: FloatArray,
+    d_k: FloatArray,
+) -> list[tuple[FloatArray, float, float, bool]]:
+    """One junction's constraints on ``vec . (t_k - t_i)``: (vec, low, high, ordering) for
+    the wall ending q_prev -> q and the next starting p -> p_next (travel d_i, d_k);
+    ordering marks the paper's inequalities, which may be relaxed."""
+    if np.allclose(d_i, d_k):
+        normal = np.array([-d_i[1], d_i[0]])
+        target = float(normal @ (q - p))
+        longest = max(np.linalg.norm(q - q_prev), np.linalg.norm(p_next - p))
+        return [
+            (normal, target - _OFFSET_SLACK, target + _OFFSET_SLACK, False),  # offsets equal
+            (d_i, float(longest + _MARGIN - d_i @ (p_next - q_prev)), np.inf, True),  # no overrun
+        ]
+    if abs(d_i @ d_k) < 0.5:
+        return [
+            (d_i, float(d_i @ (q - p) + _MARGIN), np.inf, True),  # q before the next wall's line
+            (d_k, float(d_k @ (q - p) + _MARGIN), np.inf, True),  # p past this wall's line
+        ]
+    return []
+
+
+def _anchor_rows(
+    sites: list[FloatArray], anchored: Sequence[tuple[int, Anchor]], dim: int
+) -> list[tuple[FloatArray, float]]:
+    """Least-squares rows (row, value) of the anchored pieces' sources against their prior
+    positions, plus the priors' frame offset (the last two unknowns)."""
+    out = []
+    for piece, anchor in anchored:
+        weight = 1.0 / max(anchor.sigma, 1e-6)
+        for c in range(2):
+            # (t + x + offset - prior) / sigma along coordinate c, for the piece's source.
+            row = np.zeros(dim)
+            row[2 * piece + c] = row[dim - 2 + c] = weight
+            out.append((row, float(anchor.position[c] - sites[piece][0][c]) * weight))
+    return out
 
 
 def _station_rows(

@@ -10,7 +10,8 @@ is a weighted sum of features (paper 3.2, extended):
 * ``closure``: how unlikely the gap left at the loop's end is, given that every junction
   hides an unknown overlap or gap along its wall (and a turning junction some wall on both
   sides of its corner): a Gaussian per axis whose variance grows with the junctions along
-  that axis (the paper measures the gap's Manhattan length instead);
+  that axis, and on both axes with each open end, where a frame's view lost the wall
+  (:mod:`services.open_ends`; the paper measures the gap's Manhattan length instead);
 * ``structure``: what crosses each junction, seen from both sides
   (:func:`services.placement.evidence.structure_match`);
 * ``boundary``: the paper's boundary mismatch per junction;
@@ -58,7 +59,8 @@ class JunctionNoise:
 
     A straight junction moves the next piece along the wall by the overlap or gap between
     the two scans (negative: overlap); a turning one by some unseen wall before and after
-    the hidden corner. Keypoint noise adds to both axes.
+    the hidden corner. Keypoint noise adds to both axes; an open end
+    (:mod:`services.open_ends`) ``open_sigma`` more to both.
     """
 
     straight_mean: float
@@ -67,6 +69,7 @@ class JunctionNoise:
     turn_sigma: float
     keypoint_sigma: float
     measured_sigma: float = 0.06
+    open_sigma: float = 1.5
 
     @classmethod
     def from_params(cls, params: PlacementParams) -> JunctionNoise:
@@ -78,6 +81,7 @@ class JunctionNoise:
             params.hidden_corner_sigma,
             params.keypoint_sigma,
             params.measured_shift_sigma,
+            params.open_end_sigma,
         )
 
 

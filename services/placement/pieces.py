@@ -185,6 +185,8 @@ class Piece:
     station_mates: frames only: (id, r) for each other piece whose frame shares this one's
     camera, r the quarter turns taking its aligned frame onto this one's
     (:func:`services.view_ranges.station_mates`).
+    open_ends: (source, target): frames only, whether the view continues well past that
+    end, so its junction may hide metres of wall (:func:`services.open_ends.open_ends`).
     """
 
     id: str
@@ -200,6 +202,7 @@ class Piece:
     view_top: float | None = None
     cameras: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     station_mates: tuple[tuple[str, int], ...] = ()
+    open_ends: tuple[bool, bool] = (False, False)
 
     @cached_property
     def turning(self) -> int:

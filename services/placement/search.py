@@ -235,6 +235,10 @@ class _Search:
         )
         ends = [np.stack([rot90(r) @ p.keypoints[-1] for r in range(4)]) for p in self.pieces]
         self.reach = np.array([(_CLOSURE_DIRECTIONS @ e.T).max(axis=1) for e in ends])
+        # Open ends (services.open_ends) each widen their junction's hidden displacement
+        # alike on both axes; every assembly joins every end, so the search starts with it.
+        opened = sum(sum(p.open_ends) for p in self.pieces)
+        self.open_var = opened * self.noise.open_sigma**2
         self.chain_ends = np.array(
             [[p.rotated[r][0][-1] for r in range(4)] for p in self.pieces]
         ).reshape(-1, 4, 2)
@@ -1220,12 +1224,12 @@ def _root(search: _Search) -> _State:
         turning=first.turning,
         features=features,
         mean=np.zeros(2),
-        var=np.zeros(2),
+        var=np.full(2, search.open_var),
         walls=trimmed,
         vertices=pts.copy(),
         samples=samples,
         drift_means=np.zeros((1, 2)),
-        drift_vars=np.zeros((1, 2)),
+        drift_vars=np.full((1, 2), search.open_var),
         owners=np.zeros(len(samples), dtype=np.intp),
         box=first.sample_boxes[0],
         free_at=search.free_boxes[0, 0][None].copy(),  # the first source is the origin
@@ -1557,7 +1561,7 @@ def _loop_bounds(
     closed = (np.abs(turns) < 2).all(axis=1)
     closed &= turns.sum(axis=1) + search.turning[orders].sum(axis=1) == 4
     step = search.step[before, after]  # (C, n, 2 (mean, variance), 2)
-    mean, var = step[:, :, 0].sum(axis=1), step[:, :, 1].sum(axis=1)
+    mean, var = step[:, :, 0].sum(axis=1), step[:, :, 1].sum(axis=1) + search.open_var
     end = search.chain_ends[orders, rotations].sum(axis=1)
     closure = 0.5 * (np.square(end + mean) / var + np.log(var)).sum(axis=1)
     junctions = search.junction[orders, np.roll(orders, -1, axis=1)].sum(axis=1)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from services.geometry import is_simple_rectilinear
@@ -79,3 +81,21 @@ def test_the_polygon_runs_counter_clockwise():
     x, y = polygon[:, 0], polygon[:, 1]
     area = 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
     assert area > 0
+
+
+def test_a_step_hidden_at_an_open_end_stands_where_that_view_lost_the_wall():
+    # The second chain's source is open (its view lost the wall there): the first chain's
+    # wall goes on out of its view up to the step, next to the open end.
+    pieces, translations = _placed(
+        [
+            [(0, 0), (4, 0), (4, 1)],
+            [(6, 3), (6, 5), (0, 5), (0, 0)],
+        ]
+    )
+    late = [pieces[0], dataclasses.replace(pieces[1], open_ends=(True, False))]
+    expected_late = np.array([[0, 0], [4, 0], [4, 3], [6, 3], [6, 5], [0, 5]], dtype=np.float64)
+    assert _same_polygon(build_polygon(late, [0, 0], translations), expected_late)
+    # The first chain's target open instead: the step at its end (the default place).
+    early = [dataclasses.replace(pieces[0], open_ends=(False, True)), pieces[1]]
+    expected_early = np.array([[0, 0], [4, 0], [4, 1], [6, 1], [6, 5], [0, 5]], dtype=np.float64)
+    assert _same_polygon(build_polygon(early, [0, 0], translations), expected_early)
