@@ -171,6 +171,13 @@ class PlacementParams(_Frozen):
         "at least this azimuth (degrees; services.open_ends): the junction there may hide "
         "metres of wall or a step of the room. 0: no end is open",
     )
+    open_end_least_view: float = Field(
+        1.2,
+        ge=0,
+        description="RGB-D frames: the narrowest view (radians across) whose chain ends may "
+        "be open: a kinect's (1.09) won no room by them and lost two (held-out 1000, "
+        "outside seed 17's kinect_014: a chain seen through a door, open at both ends)",
+    )
     open_end_sigma: float = Field(
         1.5,
         gt=0,

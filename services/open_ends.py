@@ -34,11 +34,15 @@ _LEAST_JUMP = 0.1  # m
 
 
 def open_ends(
-    layout: LocalLayout, least_angle: float, least_jump: float = _LEAST_JUMP
+    layout: LocalLayout,
+    least_angle: float,
+    least_view: float = 0.0,
+    least_jump: float = _LEAST_JUMP,
 ) -> tuple[bool, bool]:
     """Whether the view of a single frame continues past its chain's source and target by
     at least ``least_angle`` (radians) of azimuth around its camera, the walls seen just past
-    the end standing nearer or farther than the end by ``least_jump`` (m) or more.
+    the end standing nearer or farther than the end by ``least_jump`` (m) or more. Frames
+    seeing less than ``least_view`` (radians) across have no open end.
 
     The jump tells a lost wall from a chain that merely stopped short on a wall that goes
     on (seen past the end at the end's own distance, the chains there missed decimeters,
@@ -50,12 +54,14 @@ def open_ends(
     >>> frame = ManhattanFrame(np.eye(3), 0.0, None)
     >>> azimuth = np.radians(np.arange(-40.0, 40.0, 0.5))
     >>> ranges = np.column_stack([azimuth, np.where(azimuth > 0.25, 4.0, 2.0)])
-    >>> layout = LocalLayout(np.array([[2.0, -1.6], [2.0, 0.5]]), frame,
+    >>> layout = LocalLayout(np.array([[2.0, -1.6], [2.0, 0.5]]), frame, view_angle=1.4,
     ...                      cameras=np.zeros((1, 2)), view_ranges=ranges)
     >>> open_ends(layout, math.radians(10.0))
     (False, True)
     """
     if least_angle <= 0 or not layout.ok or len(layout.cameras) != 1:
+        return False, False
+    if layout.view_angle is None or layout.view_angle < least_view:
         return False, False
     if len(layout.view_ranges) == 0:
         return False, False

@@ -156,7 +156,9 @@ def site_pieces(
         fid: dataclasses.replace(
             make_piece(fid, layouts[fid]),
             station_mates=tuple(sorted(mates[fid].items())),
-            open_ends=open_ends(layouts[fid], math.radians(params.open_end_angle)),
+            open_ends=open_ends(
+                layouts[fid], math.radians(params.open_end_angle), params.open_end_least_view
+            ),
         )
         for fid in first
     }

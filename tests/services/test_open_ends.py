@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 
@@ -12,6 +13,7 @@ from services.types import LocalLayout, ManhattanFrame
 
 FRAME = ManhattanFrame(np.eye(3), 0.0, None)
 TEN_DEGREES = math.radians(10.0)
+REALSENSE_VIEW = math.radians(79.0)
 
 
 def _frame_view(chain: list[tuple[float, float]], ranges: np.ndarray) -> LocalLayout:
@@ -20,6 +22,7 @@ def _frame_view(chain: list[tuple[float, float]], ranges: np.ndarray) -> LocalLa
         np.asarray(chain, dtype=np.float64),
         FRAME,
         evidence="frame",
+        view_angle=REALSENSE_VIEW,
         cameras=np.zeros((1, 2)),
         view_ranges=ranges,
     )
@@ -70,6 +73,16 @@ def test_an_end_a_few_degrees_inside_the_view_is_not_open():
     layout = _frame_view([(2.0, -1.6), (2.0, 0.0)], _view(-39.5, 8.0, ranges))
     assert open_ends(layout, TEN_DEGREES) == (False, False)
     assert open_ends(layout, math.radians(5.0)) == (False, True)
+
+
+def test_a_view_narrower_than_the_least_has_no_open_end():
+    def ranges(azimuth: np.ndarray) -> np.ndarray:
+        return np.where(azimuth > 0.0, 4.0, 2.0)
+
+    layout = _frame_view([(2.0, -1.6), (2.0, 0.0)], _view(-39.5, 39.5, ranges))
+    assert open_ends(layout, TEN_DEGREES, least_view=1.2) == (False, True)
+    kinect = dataclasses.replace(layout, view_angle=math.radians(63.0))
+    assert open_ends(kinect, TEN_DEGREES, least_view=1.2) == (False, False)
 
 
 def test_clouds_merged_frames_and_a_zero_angle_have_no_open_end():
