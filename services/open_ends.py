@@ -61,7 +61,7 @@ def open_ends(
     """
     if least_angle <= 0 or not layout.ok or len(layout.cameras) != 1:
         return False, False
-    if layout.view_angle is None or layout.view_angle < least_view:
+    if (layout.view_angle or 0.0) < least_view:
         return False, False
     if len(layout.view_ranges) == 0:
         return False, False

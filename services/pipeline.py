@@ -54,6 +54,7 @@ from services.placement import (
     SiteHints,
     hint_pairs,
     make_piece,
+    open_end_count,
     piece_prior,
     place_pieces,
     rot90,
@@ -277,7 +278,7 @@ def _gap_limit(ordered: Sequence[Piece], cand: PlacementCandidate, params: Pipel
     loop_length = sum(p.length for p in ordered)
     straight = len(ordered) - int(cand.features.get("turns", 0.0))
     base = max(1.0, placement.max_closure_share * loop_length)
-    opened = sum(sum(p.open_ends) for p in ordered)
+    opened = open_end_count(ordered)
     return base + placement.straight_junction_slack * straight + placement.open_end_sigma * opened
 
 

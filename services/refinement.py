@@ -188,15 +188,22 @@ def _junction_rows(
             j_rows.append(-diff(axis) / sigma)
             g_vals.append(float(axis @ (p - q) - mu) / sigma)
         parallel = bool(np.allclose(d_i, d_k))
-        if parallel and opened:
-            continue  # the view lost the wall there: a step may hide in it
-        if parallel:
+        # At an open end parallel walls are left apart: a step the view lost may hide there.
+        if parallel and not opened:
             normal = np.array([-d_i[1], d_i[0]])
+            target = float(normal @ (q - p))
             j_rows.append(-_OFFSET_WEIGHT * diff(normal))
-            g_vals.append(-_OFFSET_WEIGHT * float(normal @ (q - p)))
-        for vec, low, high, ordering in _junction_bounds(q_prev, q, p, p_next, d_i, d_k):
-            a_rows.append(diff(vec))
-            bounds.append((low, high, ordering))
+            g_vals.append(-_OFFSET_WEIGHT * target)
+            a_rows.append(diff(normal))  # offsets equal, within the slack
+            bounds.append((target - _OFFSET_SLACK, target + _OFFSET_SLACK, False))
+            longest = max(np.linalg.norm(q - q_prev), np.linalg.norm(p_next - p))
+            a_rows.append(diff(d_i))  # no overrun
+            bounds.append((float(longest + _MARGIN - d_i @ (p_next - q_prev)), np.inf, True))
+        elif not parallel and abs(d_i @ d_k) < 0.5:
+            a_rows.append(diff(d_i))  # q stays before the next wall's line
+            bounds.append((float(d_i @ (q - p) + _MARGIN), np.inf, True))
+            a_rows.append(diff(d_k))  # p starts past this wall's line
+            bounds.append((float(d_k @ (q - p) + _MARGIN), np.inf, True))
     for row, value in [
         *_anchor_rows(sites, anchored, dim),
         *_station_rows(sites, stations, station_sigma, dim),
@@ -215,33 +222,6 @@ def _junction_rows(
         hi=np.array(highs),
         ordering=np.array([b[2] for b in bounds] + [False, False], dtype=bool),
     )
-
-
-def _junction_bounds(
-    q_prev: FloatArray,
-    q: FloatArray,
-    p: FloatArray,
-    p_next: FloatArray,
-    d_i: FloatArray,
-    d_k: FloatArray,
-) -> list[tuple[FloatArray, float, float, bool]]:
-    """One junction's constraints on ``vec . (t_k - t_i)``: (vec, low, high, ordering) for
-    the wall ending q_prev -> q and the next starting p -> p_next (travel d_i, d_k);
-    ordering marks the paper's inequalities, which may be relaxed."""
-    if np.allclose(d_i, d_k):
-        normal = np.array([-d_i[1], d_i[0]])
-        target = float(normal @ (q - p))
-        longest = max(np.linalg.norm(q - q_prev), np.linalg.norm(p_next - p))
-        return [
-            (normal, target - _OFFSET_SLACK, target + _OFFSET_SLACK, False),  # offsets equal
-            (d_i, float(longest + _MARGIN - d_i @ (p_next - q_prev)), np.inf, True),  # no overrun
-        ]
-    if abs(d_i @ d_k) < 0.5:
-        return [
-            (d_i, float(d_i @ (q - p) + _MARGIN), np.inf, True),  # q before the next wall's line
-            (d_k, float(d_k @ (q - p) + _MARGIN), np.inf, True),  # p past this wall's line
-        ]
-    return []
 
 
 def _anchor_rows(

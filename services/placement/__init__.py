@@ -5,7 +5,14 @@
 ``search`` finds the best assemblies; :func:`place_pieces` is the stage's entry.
 """
 
-from services.placement.pieces import Piece, direction_index, evidence_share, make_piece, rot90
+from services.placement.pieces import (
+    Piece,
+    direction_index,
+    evidence_share,
+    make_piece,
+    open_end_count,
+    rot90,
+)
 from services.placement.priors import SiteHints, hint_pairs, piece_prior
 from services.placement.search import (
     Placement,
@@ -27,6 +34,7 @@ __all__ = [
     "hint_pairs",
     "loop_frame_yaw",
     "make_piece",
+    "open_end_count",
     "piece_prior",
     "place_pieces",
     "rot90",

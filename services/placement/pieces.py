@@ -26,6 +26,7 @@ __all__ = [
     "direction_index",
     "evidence_share",
     "make_piece",
+    "open_end_count",
     "rot90",
     "shift_walls",
     "wall_samples",
@@ -274,6 +275,11 @@ def make_piece(fragment_id: str, layout: LocalLayout) -> Piece:
 def evidence_share(pieces: Sequence[Piece], kind: Evidence) -> float:
     """The share of ``pieces`` whose chain rests on evidence of ``kind`` (0 without pieces)."""
     return sum(piece.evidence == kind for piece in pieces) / max(len(pieces), 1)
+
+
+def open_end_count(pieces: Sequence[Piece]) -> int:
+    """How many chain ends of ``pieces`` are open (:func:`services.open_ends.open_ends`)."""
+    return sum(sum(piece.open_ends) for piece in pieces)
 
 
 def _travel_frame(

@@ -47,7 +47,14 @@ from services.placement.energy import (
     outside_area,
 )
 from services.placement.evidence import boundary_mismatch, end_voxels, register_ends
-from services.placement.pieces import SAMPLE_SPACING, Box, Piece, rot90, shift_walls
+from services.placement.pieces import (
+    SAMPLE_SPACING,
+    Box,
+    Piece,
+    open_end_count,
+    rot90,
+    shift_walls,
+)
 from services.placement.priors import (
     FrameEstimate,
     HintPair,
@@ -237,8 +244,7 @@ class _Search:
         self.reach = np.array([(_CLOSURE_DIRECTIONS @ e.T).max(axis=1) for e in ends])
         # Open ends (services.open_ends) each widen their junction's hidden displacement
         # alike on both axes; every assembly joins every end, so the search starts with it.
-        opened = sum(sum(p.open_ends) for p in self.pieces)
-        self.open_var = opened * self.noise.open_sigma**2
+        self.open_var = open_end_count(self.pieces) * self.noise.open_sigma**2
         self.chain_ends = np.array(
             [[p.rotated[r][0][-1] for r in range(4)] for p in self.pieces]
         ).reshape(-1, 4, 2)
