@@ -36,6 +36,7 @@ from services.manhattan import (
     thin_with_normals,
 )
 from services.rgbd import OPTICAL_TO_LEVEL, RgbdFrame, backproject
+from services.seen_past_corners import without_corners_seen_past
 from services.types import FloatArray, LocalLayout, ManhattanFrame, ProgressFn
 from services.view_ranges import view_ranges
 from services.wall_graph import find_wall_chain
@@ -740,6 +741,7 @@ def estimate_frame_layout(
             view_ranges=ranges,
         )
     kp = _to_frustum_edges(_without_furniture(chain.keypoints, lines), lines, views)
+    kp = without_corners_seen_past(kp, lines)
     # An end wall's length is known once it reaches the view's edge.
     kp = _drop_end_sides(kp, views, aligned, frame.floor_z)
     if len(kp) == 2 and len(views) == 1:

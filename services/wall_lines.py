@@ -225,6 +225,15 @@ class WallLine:
         centres: FloatArray = np.column_stack([run, offset] if self.axis == 0 else [offset, run])
         return centres
 
+    def seen_spans(self, max_gap: float) -> FloatArray:
+        """(S, 2) run-coordinate spans of the cells holding the line's wall points at any
+        height (its high cells on a line without that record), gaps up to ``max_gap`` m
+        bridged."""
+        cells = self.high if self.occupied is None else self.occupied | self.high
+        runs = _runs(cells, int(max_gap / self.cell_size), 1)
+        spans = self.origin + self.cell_size * np.array(runs, dtype=np.float64)
+        return spans.reshape(-1, 2)
+
     def point(self, run: float) -> FloatArray:
         """The (x, y) point at run coordinate ``run`` on this line."""
         return np.array([run, self.offset] if self.axis == 0 else [self.offset, run])

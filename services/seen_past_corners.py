@@ -1,0 +1,192 @@
+"""A frame's chain cut where one of its corners is contradicted by a wall seen past it.
+
+A room's corner joins two walls that both end there: from inside the room neither can be
+seen going on behind the other. Where a camera stands before a notch (the block between a
+U room's legs, a T room's arm) it sees the block's face end at the block's corner and,
+past that corner, the room's far wall running on into the leg. The wall graph may join the
+face's line to that far wall's line across the leg (the stretch between them is at most a
+doorway wide, and the camera saw space through it as it would through a door), making a
+corner where there is open floor. The far wall's evidence then runs on past the face's
+line, on the face's outer side, which a true corner never shows (a door does not reach up to
+a corner: a jamb stands between).
+
+Such a corner is taken out: the chain is cut there and keeps its larger part, which ends
+where its wall was seen (the face's end, or the far wall's farthest seen point). Only wall
+evidence on the lines themselves is used.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from services.types import FloatArray
+from services.wall_lines import WallLine
+
+__all__ = ["seen_past", "without_corners_seen_past"]
+
+_TOUCH = 0.2  # m, a wall's seen run starts this close to the corner (or before it)
+_PAST = 0.5  # m, and goes on at least this far beyond the other wall's line: no corner
+_MIN_PART = 0.3  # m, least length of the part of a chain kept
+_SHORT = 0.3  # m, an end wall seen stopping this far short of its end does not reach it
+_GAP = 0.3  # m, a wall seen with gaps this short is seen on through them
+_FRONT_SLACK = 0.2  # m, a wall across this close to where a wall seen past stops meets it
+_ON = 1e-6  # m, keypoints sit on their lines' offsets (and corners on both lines') exactly
+
+
+def _unit(v: FloatArray) -> FloatArray:
+    out: FloatArray = v / max(float(np.linalg.norm(v)), 1e-12)
+    return out
+
+
+def _line_of(lines: Sequence[WallLine], a: FloatArray, b: FloatArray) -> WallLine | None:
+    """The seen (not deduced) line the chain's wall from ``a`` to ``b`` runs on."""
+    step = b - a
+    axis = _axis(step)
+    travel = 1 if step[axis] > 0 else -1
+    for line in lines:
+        if (
+            not line.virtual
+            and line.axis == axis
+            and line.travel == travel
+            and abs(line.offset - a[1 - axis]) < _ON
+        ):
+            return line
+    return None
+
+
+def _spans(line: WallLine, origin: float, direction: int) -> FloatArray:
+    """Where the line's wall was seen (:meth:`WallLine.seen_spans`) as (S, 2) sorted spans
+    of ``(run - origin) * direction``."""
+    spans = (line.seen_spans(_GAP) - origin) * direction
+    return np.sort(spans, axis=1)
+
+
+def seen_past(line: WallLine, corner: FloatArray, outward: int) -> float:
+    """How far (m) ``line``'s seen wall runs on past ``corner`` in direction ``outward``
+    (+1 or -1 along the line), from a segment starting within ``_TOUCH`` of the corner or
+    before it; 0 when none does."""
+    spans = _spans(line, float(corner[line.axis]), outward)
+    touching = spans[:, 0] <= _TOUCH
+    return float(spans[touching, 1].max(initial=0.0))
+
+
+def _outside(along: FloatArray, axis: int) -> int:
+    """Along ``axis``, the direction away from the room of a wall walked along ``along``
+    (interior on its left)."""
+    left = np.array([-along[1], along[0]])
+    return -1 if left[axis] > 0 else 1
+
+
+def _axis(step: FloatArray) -> int:
+    return int(abs(step[1]) > abs(step[0]))
+
+
+def _past(lines: Sequence[WallLine], corner: FloatArray, axis: int, direction: int) -> float:
+    """How far a seen wall along ``axis`` through ``corner`` runs on past it in
+    ``direction`` (:func:`seen_past`, the most of every such line), unless a seen wall
+    across it stands where it stops: then the chain's wall at the corner is a furniture
+    front before that wall (seen at least ``_PAST`` long), and the wall seen past it is the
+    room's (0)."""
+    reach = max(
+        (
+            seen_past(line, corner, direction)
+            for line in lines
+            if not line.virtual and line.axis == axis and abs(line.offset - corner[1 - axis]) < _ON
+        ),
+        default=0.0,
+    )
+    stop = corner[axis] + direction * reach
+    for line in lines:
+        if line.virtual or line.axis == axis or abs(line.offset - stop) > _FRONT_SLACK:
+            continue
+        spans = line.seen_spans(_GAP)
+        meets = (spans[:, 0] - _GAP <= corner[1 - axis]) & (corner[1 - axis] <= spans[:, 1] + _GAP)
+        if np.any(meets & (spans[:, 1] - spans[:, 0] >= _PAST)):
+            return 0.0
+    return reach
+
+
+def _seen_end(line: WallLine, start: FloatArray, corner: FloatArray) -> FloatArray | None:
+    """Where the wall from ``start`` towards ``corner`` on ``line`` is last seen, walking
+    from ``start`` (the far end of the segment reaching farthest that overlaps the chain's
+    stretch, past the corner if the wall goes on); None when it is nowhere seen there."""
+    direction = 1 if corner[line.axis] > start[line.axis] else -1
+    spans = _spans(line, float(start[line.axis]), direction)
+    length = abs(float(corner[line.axis] - start[line.axis]))
+    overlapping = (spans[:, 1] > 0.0) & (spans[:, 0] < length)
+    if not np.any(overlapping):
+        return None
+    reach = float(spans[overlapping, 1].max())
+    end = start.copy()
+    end[line.axis] += direction * reach
+    return end
+
+
+def _cut(kp: FloatArray, i: int, lines: Sequence[WallLine]) -> FloatArray | None:
+    """The larger part of the chain cut at corner ``i``, each part ending where its wall
+    was seen; None when neither part is long enough or seen."""
+    parts = []
+    before_line = _line_of(lines, kp[i - 1], kp[i])
+    if before_line is not None:
+        end = _seen_end(before_line, kp[i - 1], kp[i])
+        if end is not None:
+            parts.append(np.vstack([kp[:i], end]))
+    after_line = _line_of(lines, kp[i], kp[i + 1])
+    if after_line is not None:
+        start = _seen_end(after_line, kp[i + 1], kp[i])
+        if start is not None:
+            parts.append(np.vstack([start, kp[i + 1 :]]))
+    parts = [p for p in parts if _length(p) >= _MIN_PART]
+    return max(parts, key=_length) if parts else None
+
+
+def _length(kp: FloatArray) -> float:
+    return float(np.linalg.norm(np.diff(kp, axis=0), axis=1).sum())
+
+
+def _contradicted(kp: FloatArray, i: int, lines: Sequence[WallLine]) -> bool:
+    """Whether the chain's corner ``i`` (0 < i < K - 1), a left turn (the room's inner
+    corner), has the wall before it seen on behind the next wall, or the next wall seen
+    from behind the wall before it."""
+    before, after = kp[i] - kp[i - 1], kp[i + 1] - kp[i]
+    if float(before[0] * after[1] - before[1] * after[0]) <= 0.0:
+        return False
+    a, b = _axis(before), _axis(after)
+    forward = 1 if before[a] > 0 else -1
+    backward = -1 if after[b] > 0 else 1
+    return max(_past(lines, kp[i], a, forward), _past(lines, kp[i], b, backward)) >= _PAST
+
+
+def without_corners_seen_past(keypoints: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
+    """The chain cut at corners a wall is seen running on past, and with ends that stop at
+    such a corner moved back to where their wall was seen.
+
+    keypoints: (K, 2) float64, aligned frame, interior on the left; lines: the frame's
+    candidate walls (the keypoints lie on their offsets).
+    """
+    kp = keypoints.copy()
+    for _ in range(len(keypoints)):
+        corner = next((i for i in range(1, len(kp) - 1) if _contradicted(kp, i, lines)), None)
+        if corner is None:
+            break
+        cut = _cut(kp, corner, lines)
+        if cut is None:
+            return kp
+        kp = cut
+    for end, inner in ((len(kp) - 1, len(kp) - 2), (0, 1)):
+        if len(kp) < 2:
+            break
+        a, b = (kp[inner], kp[end]) if end else (kp[end], kp[inner])  # chain order
+        axis = 1 - _axis(b - a)
+        if _past(lines, kp[end], axis, _outside(b - a, axis)) < _PAST:
+            continue
+        line = _line_of(lines, a, b)
+        seen = None if line is None else _seen_end(line, kp[inner], kp[end])
+        if seen is None:
+            continue
+        kept = float(np.linalg.norm(seen - kp[inner]))
+        if kept >= _MIN_PART and float(np.linalg.norm(kp[end] - seen)) >= _SHORT:
+            kp[end] = seen
+    return kp
