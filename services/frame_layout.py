@@ -38,7 +38,7 @@ from services.manhattan import (
 from services.rgbd import OPTICAL_TO_LEVEL, RgbdFrame, backproject
 from services.seen_past_corners import without_corners_seen_past
 from services.types import FloatArray, LocalLayout, ManhattanFrame, ProgressFn
-from services.view_ranges import view_ranges
+from services.view_ranges import range_towards, view_ranges
 from services.wall_graph import find_wall_chain
 from services.wall_lines import (
     MAX_DOORWAY,
@@ -55,6 +55,9 @@ _FLOOR_BAND = 0.05  # m, points this close to the floor height lie on the floor
 _MIN_FLOOR_POINTS = 50
 _MIN_HEIGHT, _MAX_HEIGHT = 0.2, 2.5  # m, camera heights over a floor that can be one
 _MAX_EXTENSION = 3.0  # m, farthest a chain end is moved out to the frustum's edge
+_SIGHT_STEP = 0.05  # m, spacing of the points a chain end's move is checked in sight at
+_SIGHT_WIDEN = 2  # view-range bins either side a nearer reading must cover to hide the line
+_SIGHT_HIDDEN = 0.3  # m, least stretch of the line hidden that stops a chain end's move
 _MIN_TURN = 0.3  # m, least length of a wall the chain's last wall turns onto (a reveal is less)
 _ON_LINE = 0.1  # m, a keypoint this close to a wall's line lies on it
 _SEED_PLANES = 2  # planes peeled off when looking for the floor's normal
@@ -540,7 +543,10 @@ def _wall_across(
 
 
 def _to_frustum_edges(
-    keypoints: FloatArray, lines: Sequence[WallLine], views: Sequence[CameraView]
+    keypoints: FloatArray,
+    lines: Sequence[WallLine],
+    views: Sequence[CameraView],
+    ranges: FloatArray | None = None,
 ) -> FloatArray:
     """Chain ends moved out along their walls to where the frustum's edges cut them.
 
@@ -551,7 +557,10 @@ def _to_frustum_edges(
     refused where the line would run through more than 2 m of space seen on both sides (the room
     opens up there), the WE-graph's limit for an edge (services.wall_graph). Nothing
     scanned on the room's side is no reason to stop: a wardrobe hides that strip as well
-    (refusing those moves cost 9 points of ACC_local on the frames benchmark).
+    (refusing those moves cost 9 points of ACC_local on the frames benchmark). But with one
+    camera (its view ``ranges``, :func:`services.view_ranges.view_ranges`) the move stops
+    where the line passes behind something seen standing more than a furniture's depth off
+    it: whether the wall goes on there, the camera could not tell.
 
     keypoints: (K, 2) float64, aligned frame, source (right of the camera) to target (left).
     """
@@ -565,6 +574,8 @@ def _to_frustum_edges(
         reach = _edge_crossing(keypoints[end], outward, views, side)
         if reach is None or reach > _MAX_EXTENSION:
             continue
+        if ranges is not None and len(views) == 1:
+            reach = _in_sight(keypoints[end], outward, reach, ranges, views[0].centre[:2])
         moved = keypoints[end] + reach * outward
         start, stop = float(keypoints[end][line.axis]), float(moved[line.axis])
         turn = _wall_across(lines, line, start, stop)
@@ -575,6 +586,28 @@ def _to_frustum_edges(
         if line.crossing_gap(start, stop) <= MAX_DOORWAY:
             out[end] = moved
     return out
+
+
+def _in_sight(
+    end: FloatArray, outward: FloatArray, reach: float, ranges: FloatArray, centre: FloatArray
+) -> float:
+    """How far (m, at most ``reach``) a chain end can move out along ``outward`` before its
+    wall's line passes, for ``_SIGHT_HIDDEN`` or more, behind something its camera (at
+    ``centre``) saw standing more than ``MAX_FURNITURE_DEPTH`` off the line (a pole or a
+    chair's back hides less)."""
+    steps = np.arange(0.0, reach + _SIGHT_STEP, _SIGHT_STEP)
+    points = end + np.minimum(steps, reach)[:, None] * outward
+    seen = range_towards(ranges, centre, points, _SIGHT_WIDEN)
+    offset = points - centre
+    distance = np.hypot(offset[:, 0], offset[:, 1])
+    # How far off the wall's line what the camera saw stands (a wardrobe's side seen at a
+    # slant is metres nearer along the ray, a furniture's depth off the line).
+    off_line = (distance - seen) * np.abs(offset @ np.array([-outward[1], outward[0]])) / distance
+    hidden = off_line > MAX_FURNITURE_DEPTH  # NaN: not hidden
+    least = int(np.ceil(_SIGHT_HIDDEN / _SIGHT_STEP))
+    runs = np.convolve(hidden.astype(np.int64), np.ones(least, dtype=np.int64), "valid")
+    first = np.flatnonzero(runs == least)
+    return float(min(steps[first[0]], reach)) if len(first) else reach
 
 
 def _wall_around_opening(
@@ -740,7 +773,7 @@ def estimate_frame_layout(
             cameras=centres,
             view_ranges=ranges,
         )
-    kp = _to_frustum_edges(_without_furniture(chain.keypoints, lines), lines, views)
+    kp = _to_frustum_edges(_without_furniture(chain.keypoints, lines), lines, views, ranges)
     kp = without_corners_seen_past(kp, lines)
     # An end wall's length is known once it reaches the view's edge.
     kp = _drop_end_sides(kp, views, aligned, frame.floor_z)

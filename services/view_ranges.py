@@ -32,7 +32,14 @@ import numpy as np
 from schemas.params import PlacementParams
 from services.types import FloatArray, LocalLayout
 
-__all__ = ["BIN", "shared_turn", "station_mates", "view_ranges", "without_odd_triangles"]
+__all__ = [
+    "BIN",
+    "range_towards",
+    "shared_turn",
+    "station_mates",
+    "view_ranges",
+    "without_odd_triangles",
+]
 
 BIN = math.radians(0.5)  # azimuth bin of the view ranges, radians
 _BINS = round(2.0 * math.pi / BIN)
@@ -80,6 +87,31 @@ def _dense(ranges: FloatArray) -> FloatArray:
     index = np.floor((ranges[:, 0] + math.pi) / BIN).astype(np.int64) % _BINS
     out[index] = ranges[:, 1]
     return out
+
+
+def range_towards(
+    ranges: FloatArray, centre: FloatArray, points: FloatArray, widen: int = 0
+) -> FloatArray:
+    """(M,) the view range (:func:`view_ranges`, seen from ``centre``) in the direction of
+    each floor-plan point (M, 2), the farthest of the ``widen`` bins either side as well (a
+    lone bin's stray reading does not hide what lies behind it); NaN where the view saw no
+    wall that way.
+
+    >>> ranges = np.array([[0.004, 2.0], [0.013, 3.0]])
+    >>> range_towards(ranges, np.zeros(2), np.array([[3.0, 0.01], [0.0, 3.0]])).tolist()
+    [2.0, nan]
+    >>> range_towards(ranges, np.zeros(2), np.array([[3.0, 0.01]]), widen=1).tolist()
+    [3.0]
+    """
+    offset = points - centre
+    azimuth = np.arctan2(offset[:, 1], offset[:, 0])
+    index = np.floor((azimuth + math.pi) / BIN).astype(np.int64)
+    dense = _dense(ranges)
+    near = dense[(index[:, None] + np.arange(-widen, widen + 1)[None, :]) % _BINS]
+    found: FloatArray = np.full(len(points), np.nan)
+    seen = ~np.all(np.isnan(near), axis=1)
+    found[seen] = np.nanmax(near[seen], axis=1)
+    return found
 
 
 def shared_turn(

@@ -25,6 +25,7 @@ from services.synthetic.render import (
     generate_frame_scene,
 )
 from services.synthetic.room import Room
+from services.wall_lines import MAX_FURNITURE_DEPTH
 from tests.frame_fixtures import ROOM_SEED, WIDE, render_views, three_frames
 
 pytestmark = pytest.mark.timeout(60)
@@ -394,3 +395,28 @@ def test_a_frames_camera_stands_at_its_aligned_frames_origin() -> None:
     world = (layout.keypoints_local() @ pose[:3, :3].T + pose[:3, 3])[:, :2]
     spin = (pose[:3, :3] @ layout.frame.rotation.T)[:2, :2]  # aligned -> world, level
     np.testing.assert_allclose(world[0] + piece.cameras[0] @ spin.T, pose[:2, 3], atol=0.02)
+
+
+def test_a_chain_end_is_not_carried_on_behind_what_the_camera_saw_nearer() -> None:
+    # A T room's far wall y = 4.45 ends at the corners x = -3.05 and 3.89, the right one
+    # turning towards the camera (it sees x = 3.89 edge-on-ish, no wall across the line).
+    # Carried out to the frustum's edge the chain ran 2.5 m past that corner, where the line
+    # lies behind the wall x = 3.89 as the camera saw it; it now stops within a furniture's
+    # depth of the corner. (Outside frames seed 20, `wide_018_T` frame_02.)
+    outline = [[-1.89, -0.98], [1.69, -0.98], [1.69, 2.24], [3.89, 2.24], [3.89, 4.45],
+               [-3.05, 4.45], [-3.05, 2.24], [-1.89, 2.24]]  # fmt: skip
+    polygon = np.array(outline, dtype=np.float64)
+    boxes = (
+        Box(np.array([-1.84, 0.07, 0.0]), np.array([-1.23, 1.88, 1.92])),
+        Box(np.array([-3.03, 2.45, 0.0]), np.array([-2.64, 3.19, 1.7])),
+        Box(np.array([-3.02, 3.54, 0.0]), np.array([-2.5, 4.26, 1.0])),
+    )
+    world = _world_chain(
+        Room.from_polygon(polygon, 2.65),
+        Furnishing(boxes=boxes),
+        ((-0.52, 0.29, 1.13), 90.4, -2.0),
+        WIDE,
+    )
+    assert world[:, 0].max() < 3.89 + MAX_FURNITURE_DEPTH, np.round(world, 2).tolist()
+    assert world[:, 0].min() > -3.05 - MAX_FURNITURE_DEPTH, np.round(world, 2).tolist()
+    np.testing.assert_allclose(world[:, 1], 4.45, atol=0.1)
