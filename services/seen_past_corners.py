@@ -35,11 +35,6 @@ _FRONT_SLACK = 0.2  # m, a wall across this close to where a wall seen past stop
 _ON = 1e-6  # m, keypoints sit on their lines' offsets (and corners on both lines') exactly
 
 
-def _unit(v: FloatArray) -> FloatArray:
-    out: FloatArray = v / max(float(np.linalg.norm(v)), 1e-12)
-    return out
-
-
 def _line_of(lines: Sequence[WallLine], a: FloatArray, b: FloatArray) -> WallLine | None:
     """The seen (not deduced) line the chain's wall from ``a`` to ``b`` runs on."""
     step = b - a
@@ -161,7 +156,7 @@ def _contradicted(kp: FloatArray, i: int, lines: Sequence[WallLine]) -> bool:
 
 def without_corners_seen_past(keypoints: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
     """The chain cut at corners a wall is seen running on past, and with ends that stop at
-    such a corner moved back to where their wall was seen.
+    such a corner moved to where their own wall was last seen.
 
     keypoints: (K, 2) float64, aligned frame, interior on the left; lines: the frame's
     candidate walls (the keypoints lie on their offsets).
