@@ -47,6 +47,8 @@ from services.wall_lines import (
     WallLine,
     find_wall_lines,
     offset_peaks,
+    run_axis,
+    wall_line_of,
 )
 
 _FLAT_COS = float(np.cos(np.radians(10.0)))  # a normal this close to +z: horizontal surface
@@ -132,23 +134,6 @@ def _floor(aligned: FloatArray, normals: FloatArray, params: PipelineParams) -> 
         if level <= foot + _FLOOR_BAND:
             return level
     return min(foot, -frame.camera_height)
-
-
-def _run_axis(step: FloatArray) -> int:
-    """The axis (0: x, 1: y) a floor-plan step along a Manhattan wall runs on."""
-    return 0 if abs(step[0]) >= abs(step[1]) else 1
-
-
-def _wall_line(lines: Sequence[WallLine], a: FloatArray, b: FloatArray) -> WallLine | None:
-    """The candidate line the chain's wall from keypoint ``a`` to ``b`` runs on."""
-    step = b - a
-    axis = _run_axis(step)
-    travel = 1 if step[axis] > 0 else -1
-    offset = a[1 - axis]
-    for line in lines:  # keypoints sit on their lines' offsets exactly
-        if line.axis == axis and line.travel == travel and abs(line.offset - offset) < 1e-6:
-            return line
-    return None
 
 
 def _edge_crossing(
@@ -317,7 +302,7 @@ def _reach_past_turn(kp: FloatArray, a: int, c: int, e: int, lines: Sequence[Wal
     cross = _cross(along, turn)
     if (cross if e > c else -cross) < 0.5:
         return 0.0  # not a left turn in chain order
-    line = _wall_line(lines, *((kp[a], kp[c]) if e > c else (kp[c], kp[a])))
+    line = wall_line_of(lines, *((kp[a], kp[c]) if e > c else (kp[c], kp[a])))
     if line is None:
         return 0.0
     outward = 1 if along[line.axis] > 0 else -1
@@ -343,7 +328,7 @@ def _with_wall_before_front(keypoints: FloatArray, lines: Sequence[WallLine]) ->
     # A walked onto the source (a left turn onto F), or away from the target.
     for end, direction, before, order in ((0, -left, -1, (0, 1, 2)), (1, left, 1, (2, 1, 0))):
         corner = keypoints[end]
-        line = _wall_line(lines, corner, corner + direction)
+        line = wall_line_of(lines, corner, corner + direction)
         if line is None:
             continue
         outward = 1 if direction[line.axis] > 0 else -1
@@ -567,7 +552,7 @@ def _to_frustum_edges(
     out = keypoints.copy()
     for side, (end, inner) in enumerate(((0, 1), (-1, -2))):
         first, second = sorted((end, inner), key=lambda i: i % len(keypoints))
-        line = _wall_line(lines, keypoints[first], keypoints[second])  # in chain order
+        line = wall_line_of(lines, keypoints[first], keypoints[second])  # in chain order
         if line is None:
             continue
         outward = _unit(keypoints[end] - keypoints[inner])
@@ -630,7 +615,7 @@ def _wall_around_opening(
 
     keypoints: (2, 2) the chain; aligned, normals: (N, 3) the frame's points, aligned frame.
     """
-    axis = _run_axis(keypoints[1] - keypoints[0])
+    axis = run_axis(keypoints[1] - keypoints[0])
     across = 1 - axis
     centre = view.centre[:2]
     side = 1.0 if keypoints[0, across] > centre[across] else -1.0

@@ -22,7 +22,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from services.types import FloatArray
-from services.wall_lines import WallLine
+from services.wall_lines import WallLine, run_axis, wall_line_of
 
 __all__ = ["seen_past", "without_corners_seen_past"]
 
@@ -33,22 +33,6 @@ _SHORT = 0.3  # m, an end wall seen stopping this far short of its end does not 
 _GAP = 0.3  # m, a wall seen with gaps this short is seen on through them
 _FRONT_SLACK = 0.2  # m, a wall across this close to where a wall seen past stops meets it
 _ON = 1e-6  # m, keypoints sit on their lines' offsets (and corners on both lines') exactly
-
-
-def _line_of(lines: Sequence[WallLine], a: FloatArray, b: FloatArray) -> WallLine | None:
-    """The seen (not deduced) line the chain's wall from ``a`` to ``b`` runs on."""
-    step = b - a
-    axis = _axis(step)
-    travel = 1 if step[axis] > 0 else -1
-    for line in lines:
-        if (
-            not line.virtual
-            and line.axis == axis
-            and line.travel == travel
-            and abs(line.offset - a[1 - axis]) < _ON
-        ):
-            return line
-    return None
 
 
 def _spans(line: WallLine, origin: float, direction: int) -> FloatArray:
@@ -72,10 +56,6 @@ def _outside(along: FloatArray, axis: int) -> int:
     (interior on its left)."""
     left = np.array([-along[1], along[0]])
     return -1 if left[axis] > 0 else 1
-
-
-def _axis(step: FloatArray) -> int:
-    return int(abs(step[1]) > abs(step[0]))
 
 
 def _past(lines: Sequence[WallLine], corner: FloatArray, axis: int, direction: int) -> float:
@@ -123,12 +103,12 @@ def _cut(kp: FloatArray, i: int, lines: Sequence[WallLine]) -> FloatArray | None
     """The larger part of the chain cut at corner ``i``, each part ending where its wall
     was seen; None when neither part is long enough or seen."""
     parts = []
-    before_line = _line_of(lines, kp[i - 1], kp[i])
+    before_line = wall_line_of(lines, kp[i - 1], kp[i], seen_only=True)
     if before_line is not None:
         end = _seen_end(before_line, kp[i - 1], kp[i])
         if end is not None:
             parts.append(np.vstack([kp[:i], end]))
-    after_line = _line_of(lines, kp[i], kp[i + 1])
+    after_line = wall_line_of(lines, kp[i], kp[i + 1], seen_only=True)
     if after_line is not None:
         start = _seen_end(after_line, kp[i + 1], kp[i])
         if start is not None:
@@ -148,7 +128,7 @@ def _contradicted(kp: FloatArray, i: int, lines: Sequence[WallLine]) -> bool:
     before, after = kp[i] - kp[i - 1], kp[i + 1] - kp[i]
     if float(before[0] * after[1] - before[1] * after[0]) <= 0.0:
         return False
-    a, b = _axis(before), _axis(after)
+    a, b = run_axis(before), run_axis(after)
     forward = 1 if before[a] > 0 else -1
     backward = -1 if after[b] > 0 else 1
     return max(_past(lines, kp[i], a, forward), _past(lines, kp[i], b, backward)) >= _PAST
@@ -174,10 +154,10 @@ def without_corners_seen_past(keypoints: FloatArray, lines: Sequence[WallLine]) 
         if len(kp) < 2:
             break
         a, b = (kp[inner], kp[end]) if end else (kp[end], kp[inner])  # chain order
-        axis = 1 - _axis(b - a)
+        axis = 1 - run_axis(b - a)
         if _past(lines, kp[end], axis, _outside(b - a, axis)) < _PAST:
             continue
-        line = _line_of(lines, a, b)
+        line = wall_line_of(lines, a, b, seen_only=True)
         seen = None if line is None else _seen_end(line, kp[inner], kp[end])
         if seen is None:
             continue

@@ -20,7 +20,7 @@ from scipy.sparse.csgraph import dijkstra, minimum_spanning_tree
 from schemas.params import LayoutParams
 from services.frustum import CameraView, in_any_view
 from services.types import FloatArray
-from services.wall_lines import MAX_DOORWAY, WallLine
+from services.wall_lines import MAX_DOORWAY, WallLine, run_axis
 
 __all__ = ["WallChain", "find_wall_chain"]
 
@@ -357,7 +357,7 @@ def _extended_ends(
         best: tuple[float, int, bool] | None = None
         for at_start in (True, False):
             end, inner = (path[0], path[1]) if at_start else (path[-1], path[-2])
-            end_axis = _axis_of(points[end] - points[inner])
+            end_axis = run_axis(points[end] - points[inner])
             edges = into[:, end] if at_start else out_of[end]
             for other in edges.indices:
                 tail, head = (int(other), end) if at_start else (end, int(other))
@@ -365,7 +365,7 @@ def _extended_ends(
                 passed[end] = False
                 if (passed & held).any():
                     continue
-                turn = _axis_of(points[head] - points[tail]) != end_axis
+                turn = run_axis(points[head] - points[tail]) != end_axis
                 gain = cover[tail, head] - _COST_METERS * we[tail, head] - corner_price * turn
                 if gain > 1e-9 and (best is None or gain > best[0]):
                     best = (gain, int(other), at_start)
@@ -377,15 +377,10 @@ def _extended_ends(
     return path, score
 
 
-def _axis_of(step: FloatArray) -> int:
-    """0 for a step mostly along x, 1 along y."""
-    return int(abs(step[1]) > abs(step[0]))
-
-
 def _segment_nodes(points: FloatArray, a: int, b: int) -> NDArray[np.bool_]:
     """(n,) the nodes on the axis-parallel segment from node ``a`` to node ``b``, both ends
     included (within :data:`_ON_SEGMENT`)."""
-    axis = _axis_of(points[b] - points[a])
+    axis = run_axis(points[b] - points[a])
     along, across = points[:, axis], points[:, 1 - axis]
     lo, hi = sorted((along[a], along[b]))
     return (  # type: ignore[no-any-return]
@@ -645,7 +640,7 @@ def _path_edges(path: list[int], points: FloatArray) -> list[_Edge]:
     """A path's edges on their walls, in path order."""
     edges = []
     for a, b in itertools.pairwise(path):
-        axis = _axis_of(points[b] - points[a])
+        axis = run_axis(points[b] - points[a])
         ends = float(points[a, axis]), float(points[b, axis])
         travel = 1 if ends[1] > ends[0] else -1
         edges.append(_Edge(axis, travel, float(points[a, 1 - axis]), ends))
@@ -699,7 +694,7 @@ def _ends_along_high_wall(points: FloatArray, lines: Sequence[WallLine]) -> Floa
     out = points.copy()
     for end, inner in ((0, 1), (-1, -2)):
         step = out[end] - out[inner]
-        axis = int(abs(step[1]) > abs(step[0]))
+        axis = run_axis(step)
         outward = 1 if step[axis] > 0 else -1
         travel = outward if end == -1 else -outward  # the chain's direction along the wall
         reach = max(

@@ -32,7 +32,9 @@ __all__ = [
     "WallLine",
     "evidence_threshold",
     "find_wall_lines",
+    "run_axis",
     "scan_top",
+    "wall_line_of",
 ]
 
 _HIST_BIN = 0.01  # m, offset histogram resolution
@@ -237,6 +239,28 @@ class WallLine:
     def point(self, run: float) -> FloatArray:
         """The (x, y) point at run coordinate ``run`` on this line."""
         return np.array([run, self.offset] if self.axis == 0 else [self.offset, run])
+
+
+def run_axis(step: FloatArray) -> int:
+    """The axis (0: x, 1: y) a floor-plan step along a Manhattan wall runs on."""
+    return 0 if abs(step[0]) >= abs(step[1]) else 1
+
+
+def wall_line_of(
+    lines: Sequence[WallLine], a: FloatArray, b: FloatArray, seen_only: bool = False
+) -> WallLine | None:
+    """The candidate line a chain's wall from keypoint ``a`` to ``b`` runs on (keypoints sit
+    on their lines' offsets exactly); with ``seen_only``, not a deduced (virtual) one."""
+    step = b - a
+    axis = run_axis(step)
+    travel = 1 if step[axis] > 0 else -1
+    offset = a[1 - axis]
+    for line in lines:
+        if seen_only and line.virtual:
+            continue
+        if line.axis == axis and line.travel == travel and abs(line.offset - offset) < 1e-6:
+            return line
+    return None
 
 
 def evidence_threshold(column_counts: NDArray[np.int64], band: float, params: LayoutParams) -> int:
