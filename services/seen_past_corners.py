@@ -13,11 +13,20 @@ a corner: a jamb stands between).
 Such a corner is taken out: the chain is cut there and keeps its larger part, which ends
 where its wall was seen (the face's end, or the far wall's farthest seen point). Only wall
 evidence on the lines themselves is used.
+
+A right turn (a reflex corner of the room) is contradicted the same way, from the other
+side: past such a corner each wall's line runs through the room, where no wall stands. When
+one of its walls is seen going on past it (a window's sill and lintel, a door's lintel)
+and the other is seen only from beyond that wall's line (it starts a wall's thickness or
+more behind it), the other is a wall outside, seen through the opening: a neighbour's wall,
+or the side of what stands outside. The chain is cut there and keeps the part along the
+wall that goes on, carried as far as that wall was seen.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Literal
 
 import numpy as np
 
@@ -33,6 +42,12 @@ _SHORT = 0.3  # m, an end wall seen stopping this far short of its end does not 
 _GAP = 0.3  # m, a wall seen with gaps this short is seen on through them
 _FRONT_SLACK = 0.2  # m, a wall across this close to where a wall seen past stops meets it
 _ON = 1e-6  # m, keypoints sit on their lines' offsets (and corners on both lines') exactly
+_DETACHED = 0.15  # m, a wall first seen this far or more past a reflex corner is behind it
+# m, how far a wall must be seen on past a reflex corner: less is often low clutter standing
+# in line with it in the room (outside frames seed 20: 0.51 m at a T room's corner)
+_PAST_REFLEX = 1.0
+
+Keep = Literal["larger", "before", "after"]  # which part of a chain cut at a corner to keep
 
 
 def _spans(line: WallLine, origin: float, direction: int) -> FloatArray:
@@ -99,17 +114,20 @@ def _seen_end(line: WallLine, start: FloatArray, corner: FloatArray) -> FloatArr
     return end
 
 
-def _cut(kp: FloatArray, i: int, lines: Sequence[WallLine]) -> FloatArray | None:
-    """The larger part of the chain cut at corner ``i``, each part ending where its wall
-    was seen; None when neither part is long enough or seen."""
+def _cut(
+    kp: FloatArray, i: int, lines: Sequence[WallLine], keep: Keep = "larger"
+) -> FloatArray | None:
+    """The chain cut at corner ``i``, each part ending where its wall was seen: the larger
+    part, or the part ``keep`` says ("before" or "after" the corner); None when that part
+    (or neither) is long enough or seen."""
     parts = []
     before_line = wall_line_of(lines, kp[i - 1], kp[i], seen_only=True)
-    if before_line is not None:
+    if before_line is not None and keep != "after":
         end = _seen_end(before_line, kp[i - 1], kp[i])
         if end is not None:
             parts.append(np.vstack([kp[:i], end]))
     after_line = wall_line_of(lines, kp[i], kp[i + 1], seen_only=True)
-    if after_line is not None:
+    if after_line is not None and keep != "before":
         start = _seen_end(after_line, kp[i + 1], kp[i])
         if start is not None:
             parts.append(np.vstack([start, kp[i + 1 :]]))
@@ -121,17 +139,56 @@ def _length(kp: FloatArray) -> float:
     return float(np.linalg.norm(np.diff(kp, axis=0), axis=1).sum())
 
 
-def _contradicted(kp: FloatArray, i: int, lines: Sequence[WallLine]) -> bool:
-    """Whether the chain's corner ``i`` (0 < i < K - 1), a left turn (the room's inner
-    corner), has the wall before it seen on behind the next wall, or the next wall seen
-    from behind the wall before it."""
+def _first_seen(line: WallLine | None, corner: FloatArray, far: FloatArray) -> float:
+    """How far from ``corner`` (m), walking towards ``far`` along the chain's wall between
+    them (on ``line``), its first segment starts (0 when at or before the corner; inf
+    when none is there, or the wall was deduced: nothing to judge by). Segments, not any
+    wall point: a window's reveal joins the wall outside to the corner at sill height."""
+    if line is None:
+        return np.inf
+    direction = 1 if far[line.axis] > corner[line.axis] else -1
+    spans = np.sort((line.segments - float(corner[line.axis])) * direction, axis=1)
+    length = abs(float(far[line.axis] - corner[line.axis]))
+    starts = spans[(spans[:, 1] > 0.0) & (spans[:, 0] < length), 0]
+    return max(float(starts.min(initial=np.inf)), 0.0)
+
+
+def _contradicted(kp: FloatArray, i: int, lines: Sequence[WallLine]) -> Keep | None:
+    """Which part of the chain to keep when its corner ``i`` (0 < i < K - 1) is
+    contradicted, else None.
+
+    A left turn (the room's inner corner) with the wall before it seen on behind the next
+    wall, or the next wall seen from behind the wall before it: the larger part ("larger").
+    A right turn (a reflex corner) with the wall before it seen on past it while the next is
+    first seen from behind its line (a seen wall, not one deduced across what the camera
+    did not see): the part before ("before"); and the other way round ("after").
+    """
     before, after = kp[i] - kp[i - 1], kp[i + 1] - kp[i]
-    if float(before[0] * after[1] - before[1] * after[0]) <= 0.0:
-        return False
+    turn = float(before[0] * after[1] - before[1] * after[0])
     a, b = run_axis(before), run_axis(after)
     forward = 1 if before[a] > 0 else -1
     backward = -1 if after[b] > 0 else 1
-    return max(_past(lines, kp[i], a, forward), _past(lines, kp[i], b, backward)) >= _PAST
+    if turn > 0.0:
+        if max(_past(lines, kp[i], a, forward), _past(lines, kp[i], b, backward)) >= _PAST:
+            return "larger"
+        return None
+    if turn == 0.0:
+        return None
+    line_before = wall_line_of(lines, kp[i - 1], kp[i], seen_only=True)
+    line_after = wall_line_of(lines, kp[i], kp[i + 1], seen_only=True)
+    if (
+        line_before is not None
+        and seen_past(line_before, kp[i], forward) >= _PAST_REFLEX
+        and _DETACHED <= _first_seen(line_after, kp[i], kp[i + 1]) < np.inf
+    ):
+        return "before"
+    if (
+        line_after is not None
+        and seen_past(line_after, kp[i], backward) >= _PAST_REFLEX
+        and _DETACHED <= _first_seen(line_before, kp[i], kp[i - 1]) < np.inf
+    ):
+        return "after"
+    return None
 
 
 def without_corners_seen_past(keypoints: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
@@ -143,10 +200,11 @@ def without_corners_seen_past(keypoints: FloatArray, lines: Sequence[WallLine]) 
     """
     kp = keypoints.copy()
     for _ in range(len(keypoints)):
-        corner = next((i for i in range(1, len(kp) - 1) if _contradicted(kp, i, lines)), None)
-        if corner is None:
+        found = ((i, _contradicted(kp, i, lines)) for i in range(1, len(kp) - 1))
+        corner, keep = next(((i, k) for i, k in found if k is not None), (None, None))
+        if corner is None or keep is None:
             break
-        cut = _cut(kp, corner, lines)
+        cut = _cut(kp, corner, lines, keep)
         if cut is None:
             return kp
         kp = cut

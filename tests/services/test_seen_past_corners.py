@@ -62,6 +62,32 @@ def test_an_end_at_a_wall_seen_behind_it_goes_back_to_where_its_own_wall_was_see
     np.testing.assert_allclose(without_corners_seen_past(chain, lines), chain)
 
 
+def test_a_reflex_corner_onto_a_wall_seen_only_beyond_the_last_is_cut() -> None:
+    # Walking -x along y = 0 (room at y < 0), the chain turns right at (0, 0) onto x = 0,
+    # going out past y = 0. But y = 0 is seen on past the corner (a window's sill), and
+    # x = 0 only from 0.3 m behind y = 0: a wall outside, seen through the window.
+    chain = np.array([[4.0, 0.0], [0.0, 0.0], [0.0, 2.0]])
+    lines = [_line(0, 0.0, -1, [(-1.5, 4.0)]), _line(1, 0.0, 1, [(0.3, 2.0)])]
+    np.testing.assert_allclose(without_corners_seen_past(chain, lines), [[4.0, 0.0], [-1.5, 0.0]])
+    # The wall turned onto seen from the corner on: a reflex corner, kept.
+    lines[1] = _line(1, 0.0, 1, [(0.0, 2.0)])
+    np.testing.assert_allclose(without_corners_seen_past(chain, lines), chain)
+    # The last wall seen on past the corner only 0.5 m (low clutter in line with it, in the
+    # room), or not at all: kept as well.
+    for seen in (-0.5, 0.0):
+        lines = [_line(0, 0.0, -1, [(seen, 4.0)]), _line(1, 0.0, 1, [(0.3, 2.0)])]
+        np.testing.assert_allclose(without_corners_seen_past(chain, lines), chain)
+
+
+def test_a_reflex_corner_coming_from_a_wall_seen_only_beyond_the_next_is_cut() -> None:
+    # The outside wall first: y = 0 walked -x, seen only from 0.3 m beyond x = 0, which is
+    # seen on past the corner (under a window): the part along x = 0 is kept, from where
+    # it was seen.
+    chain = np.array([[2.0, 0.0], [0.0, 0.0], [0.0, 3.0]])
+    lines = [_line(0, 0.0, -1, [(0.3, 2.0)]), _line(1, 0.0, 1, [(-1.5, 3.0)])]
+    np.testing.assert_allclose(without_corners_seen_past(chain, lines), [[0.0, -1.5], [0.0, 3.0]])
+
+
 # Three U rooms of the outside frame benchmark (seed 19), each seen from before its block:
 # the chain used to join the block's face to the far wall across a leg.
 _U_ROOMS = [
