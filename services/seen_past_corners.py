@@ -50,18 +50,28 @@ _PAST_REFLEX = 1.0
 Keep = Literal["larger", "before", "after"]  # which part of a chain cut at a corner to keep
 
 
-def _spans(line: WallLine, origin: float, direction: int) -> FloatArray:
-    """Where the line's wall was seen (:meth:`WallLine.seen_spans`) as (S, 2) sorted spans
-    of ``(run - origin) * direction``."""
-    spans = (line.seen_spans(_GAP) - origin) * direction
-    return np.sort(spans, axis=1)
+def _relative(spans: FloatArray, origin: float, direction: int) -> FloatArray:
+    """(S, 2) run-coordinate ``spans`` as sorted spans of ``(run - origin) * direction``."""
+    return np.sort((spans - origin) * direction, axis=1)
+
+
+def _on_stretch(
+    spans: FloatArray, start: FloatArray, towards: FloatArray, axis: int
+) -> tuple[FloatArray, int]:
+    """The run-coordinate ``spans`` of a line along ``axis`` as distances from ``start``
+    walking towards ``towards`` (:func:`_relative`), only those overlapping the stretch
+    between the two; and that walking direction along the axis (+1 or -1)."""
+    direction = 1 if towards[axis] > start[axis] else -1
+    relative = _relative(spans, float(start[axis]), direction)
+    length = abs(float(towards[axis] - start[axis]))
+    return relative[(relative[:, 1] > 0.0) & (relative[:, 0] < length)], direction
 
 
 def seen_past(line: WallLine, corner: FloatArray, outward: int) -> float:
     """How far (m) ``line``'s seen wall runs on past ``corner`` in direction ``outward``
     (+1 or -1 along the line), from a segment starting within ``_TOUCH`` of the corner or
     before it; 0 when none does."""
-    spans = _spans(line, float(corner[line.axis]), outward)
+    spans = _relative(line.seen_spans(_GAP), float(corner[line.axis]), outward)
     touching = spans[:, 0] <= _TOUCH
     return float(spans[touching, 1].max(initial=0.0))
 
@@ -102,13 +112,10 @@ def _seen_end(line: WallLine, start: FloatArray, corner: FloatArray) -> FloatArr
     """Where the wall from ``start`` towards ``corner`` on ``line`` is last seen, walking
     from ``start`` (the far end of the segment reaching farthest that overlaps the chain's
     stretch, past the corner if the wall goes on); None when it is nowhere seen there."""
-    direction = 1 if corner[line.axis] > start[line.axis] else -1
-    spans = _spans(line, float(start[line.axis]), direction)
-    length = abs(float(corner[line.axis] - start[line.axis]))
-    overlapping = (spans[:, 1] > 0.0) & (spans[:, 0] < length)
-    if not np.any(overlapping):
+    spans, direction = _on_stretch(line.seen_spans(_GAP), start, corner, line.axis)
+    if not len(spans):
         return None
-    reach = float(spans[overlapping, 1].max())
+    reach = float(spans[:, 1].max())
     end = start.copy()
     end[line.axis] += direction * reach
     return end
@@ -146,11 +153,8 @@ def _first_seen(line: WallLine | None, corner: FloatArray, far: FloatArray) -> f
     wall point: a window's reveal joins the wall outside to the corner at sill height."""
     if line is None:
         return np.inf
-    direction = 1 if far[line.axis] > corner[line.axis] else -1
-    spans = np.sort((line.segments - float(corner[line.axis])) * direction, axis=1)
-    length = abs(float(far[line.axis] - corner[line.axis]))
-    starts = spans[(spans[:, 1] > 0.0) & (spans[:, 0] < length), 0]
-    return max(float(starts.min(initial=np.inf)), 0.0)
+    spans, _ = _on_stretch(line.segments, corner, far, line.axis)
+    return max(float(spans[:, 0].min(initial=np.inf)), 0.0)
 
 
 def _contradicted(kp: FloatArray, i: int, lines: Sequence[WallLine]) -> Keep | None:
