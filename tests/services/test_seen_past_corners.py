@@ -47,6 +47,21 @@ def test_an_inner_corner_with_its_next_wall_seen_behind_the_last_is_cut() -> Non
     np.testing.assert_allclose(without_corners_seen_past(chain, lines), chain)
 
 
+def test_an_inner_corner_neither_wall_shows_is_cut_on_a_shorter_run_past() -> None:
+    # A block's face y = 0 seen only up to x = 2 (its corner), then the chain turns left at
+    # (4, 0) onto the leg's far wall x = 4, seen on 0.4 m behind y = 0 (past the block's
+    # corner the camera sees into the leg): no corner stands at (4, 0).
+    chain = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 5.0]])
+    lines = [_line(0, 0.0, 1, [(0.0, 2.0)]), _line(1, 4.0, 1, [(-0.4, 5.0)])]
+    np.testing.assert_allclose(without_corners_seen_past(chain, lines), [[4.0, -0.4], [4.0, 5.0]])
+    # The face seen up to the corner: a true corner (the far wall's run past is noise), kept.
+    lines[0] = _line(0, 0.0, 1, [(0.0, 3.9)])
+    np.testing.assert_allclose(without_corners_seen_past(chain, lines), chain)
+    # Not seen at the corner, but the far wall seen on only 0.2 m: kept.
+    lines = [_line(0, 0.0, 1, [(0.0, 2.0)]), _line(1, 4.0, 1, [(-0.2, 5.0)])]
+    np.testing.assert_allclose(without_corners_seen_past(chain, lines), chain)
+
+
 def test_an_end_at_a_wall_seen_behind_it_goes_back_to_where_its_own_wall_was_seen() -> None:
     chain = np.array([[0.0, 1.0], [0.0, 0.0], [4.0, 0.0]])  # ends on x = 4, room at y > 0
     lines = [
