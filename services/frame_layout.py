@@ -60,6 +60,8 @@ _MAX_EXTENSION = 3.0  # m, farthest a chain end is moved out to the frustum's ed
 _SIGHT_STEP = 0.05  # m, spacing of the points a chain end's move is checked in sight at
 _SIGHT_WIDEN = 2  # view-range bins either side a nearer reading must cover to hide the line
 _SIGHT_HIDDEN = 0.3  # m, least stretch of the line hidden that stops a chain end's move
+_ACROSS_NEARER = 0.2  # m, what hides the line stands at least this much nearer along the ray
+_ACROSS_SPREAD = 0.1  # m, most its run coordinate varies over that stretch: a surface across
 _MIN_TURN = 0.3  # m, least length of a wall the chain's last wall turns onto (a reveal is less)
 _ON_LINE = 0.1  # m, a keypoint this close to a wall's line lies on it
 _SEED_PLANES = 2  # planes peeled off when looking for the floor's normal
@@ -560,7 +562,10 @@ def _to_frustum_edges(
         if reach is None or reach > _MAX_EXTENSION:
             continue
         if ranges is not None and len(views) == 1:
-            reach = _in_sight(keypoints[end], outward, reach, ranges, views[0].centre[:2])
+            centre = views[0].centre[:2]
+            reach = _in_sight(keypoints[end], outward, reach, ranges, centre)
+            across = _wall_hiding(keypoints[end], outward, reach, ranges, centre, lines, line)
+            reach = reach if across is None else across
         moved = keypoints[end] + reach * outward
         start, stop = float(keypoints[end][line.axis]), float(moved[line.axis])
         turn = _wall_across(lines, line, start, stop)
@@ -593,6 +598,49 @@ def _in_sight(
     runs = np.convolve(hidden.astype(np.int64), np.ones(least, dtype=np.int64), "valid")
     first = np.flatnonzero(runs == least)
     return float(min(steps[first[0]], reach)) if len(first) else reach
+
+
+def _wall_hiding(
+    end: FloatArray,
+    outward: FloatArray,
+    reach: float,
+    ranges: FloatArray,
+    centre: FloatArray,
+    lines: Sequence[WallLine],
+    line: WallLine,
+) -> float | None:
+    """How far (m, 0 to ``reach``) a chain end can move out along ``outward`` when its
+    wall's line ends up behind a wall across it; None when it does not.
+
+    What hides the last ``_SIGHT_HIDDEN`` of the move from the camera (at ``centre``; its
+    view ``ranges``) stands at one run coordinate along the line: a surface across the line
+    that goes on as far as the view does, not a furniture front along it, nor the side of
+    furniture that a front along the line follows. When a seen wall of the other axis lies
+    at that run, the room's wall turns there: a corner whose wall furniture hid near the
+    line (its segments stop short of it, so :func:`_wall_across` misses it) still ends the
+    move, which :func:`_in_sight` stops only behind what stands a furniture's depth off the
+    line.
+    """
+    least = int(np.ceil(_SIGHT_HIDDEN / _SIGHT_STEP))
+    # Short of the frustum's edge: the bins there hold the edge of the view.
+    steps = np.arange(0.0, reach, _SIGHT_STEP)[-least:]
+    if len(steps) < least:
+        return None
+    points = end + steps[:, None] * outward
+    seen = range_towards(ranges, centre, points, _SIGHT_WIDEN)
+    offset = points - centre
+    distance = np.hypot(offset[:, 0], offset[:, 1])
+    if not np.all(distance - seen >= _ACROSS_NEARER):  # NaN: nothing seen that way
+        return None
+    run = (centre + (seen / distance)[:, None] * offset - end) @ outward
+    if np.ptp(run) > _ACROSS_SPREAD:
+        return None
+    at = float(np.median(run))
+    coordinate = float(end[line.axis] + at * outward[line.axis])
+    walls = [other.offset for other in lines if not other.virtual and other.axis != line.axis]
+    if not any(abs(wall - coordinate) <= _ACROSS_SPREAD for wall in walls):
+        return None
+    return min(max(at, 0.0), reach)
 
 
 def _wall_around_opening(

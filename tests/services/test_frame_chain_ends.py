@@ -125,6 +125,52 @@ def test_chain_ends_move_out_to_the_frustum_edges_or_to_a_wall_turning_on_the_wa
     np.testing.assert_allclose(moved[1], 3.0 / left[1] * left, atol=1e-9)
 
 
+def _ranges(segments: list[tuple[tuple[float, float], tuple[float, float]]]) -> np.ndarray:
+    """View ranges (:func:`services.view_ranges.view_ranges`' form) of a camera at the
+    origin seeing the floor-plan wall ``segments`` ((x0, y0), (x1, y1)): the nearest hit
+    per half-degree bin."""
+    azimuth = -np.pi + (np.arange(720) + 0.5) * np.radians(0.5)
+    ray = np.column_stack([np.cos(azimuth), np.sin(azimuth)])
+    nearest = np.full(len(azimuth), np.inf)
+    for a, b in segments:
+        start, step = np.array(a), np.subtract(b, a)
+        # Solve t * ray = start + u * step for t (along the ray) and u (along the segment).
+        det = ray[:, 0] * -step[1] + ray[:, 1] * step[0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (start[0] * -step[1] + start[1] * step[0]) / det
+            u = (ray[:, 0] * start[1] - ray[:, 1] * start[0]) / det
+        hit = (np.abs(det) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1)
+        nearest = np.where(hit, np.minimum(nearest, t), nearest)
+    seen = np.isfinite(nearest)
+    return np.column_stack([azimuth[seen], nearest[seen]])
+
+
+def test_a_chain_end_stops_at_a_wall_across_that_furniture_hid_at_the_corner() -> None:
+    # A wide camera 1 m before the wall y = 1 (room below, travel -x); the chain's target
+    # end is at the corner x = -0.3, where the room's wall x = -0.3 turns towards the
+    # camera. Furniture hid that wall near the corner: its line's segment stops 0.6 m short
+    # of y = 1, so no wall across meets the line there, and what hides the line past the
+    # corner stands under a furniture's depth off it. (Outside frames seed 22,
+    # `wide_019_real` frame_00: carried 2.2 m past the room's corner.)
+    view = CameraView.from_intrinsics(WIDE, LEVEL, np.zeros(3))
+    _, left = side_rays(view)
+    chain = np.array([[0.3, 1.0], [-0.3, 1.0]])
+    across = WallLine(**{**_line(-0.3, 1, axis=1).__dict__, "segments": np.array([[-2.0, 0.4]])})
+    lines = [_line(1.0, -1), across]
+    corner = _ranges([((0.3, 1.0), (-0.3, 1.0)), ((-0.3, 1.0), (-0.3, -3.0))])
+    moved = _to_frustum_edges(chain, lines, [view], corner)
+    np.testing.assert_allclose(moved[1], chain[1], atol=0.05)
+    # The same view with no wall seen across there: the end goes on (until the line lies a
+    # furniture's depth behind what the camera saw).
+    moved = _to_frustum_edges(chain, [_line(1.0, -1)], [view], corner)
+    assert moved[1][0] < -1.0
+    # A furniture front 0.5 m before the wall hides the line past the end instead (along
+    # it, not across): the wall goes on behind it, to the frustum's edge.
+    front = _ranges([((0.3, 1.0), (-0.3, 1.0)), ((-0.3, 0.5), (-3.0, 0.5))])
+    moved = _to_frustum_edges(chain, lines, [view], front)
+    np.testing.assert_allclose(moved[1], 1.0 / left[1] * left, atol=1e-9)
+
+
 def test_the_floor_plan_wedge_of_a_pitched_camera_is_wider_than_its_eye_level_cut() -> None:
     view = CameraView.from_intrinsics(WIDE, _pitched(-20.0), np.zeros(3))
     right, _ = side_rays(view)
