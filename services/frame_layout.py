@@ -578,6 +578,18 @@ def _to_frustum_edges(
     return out
 
 
+def _line_in_view(
+    end: FloatArray, outward: FloatArray, along: FloatArray, ranges: FloatArray, centre: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The points ``along`` (m) out from a chain end on its wall's line as its camera (at
+    ``centre``, its view ``ranges``) sees them: their (M, 2) offsets from the camera, their
+    (M,) distances, and (M,) how far the view saw that way (NaN: nothing seen)."""
+    points = end + along[:, None] * outward
+    offset = points - centre
+    distance = np.hypot(offset[:, 0], offset[:, 1])
+    return offset, distance, range_towards(ranges, centre, points, _SIGHT_WIDEN)
+
+
 def _in_sight(
     end: FloatArray, outward: FloatArray, reach: float, ranges: FloatArray, centre: FloatArray
 ) -> float:
@@ -586,10 +598,7 @@ def _in_sight(
     ``centre``) saw standing more than ``MAX_FURNITURE_DEPTH`` off the line (a pole or a
     chair's back hides less)."""
     steps = np.arange(0.0, reach + _SIGHT_STEP, _SIGHT_STEP)
-    points = end + np.minimum(steps, reach)[:, None] * outward
-    seen = range_towards(ranges, centre, points, _SIGHT_WIDEN)
-    offset = points - centre
-    distance = np.hypot(offset[:, 0], offset[:, 1])
+    offset, distance, seen = _line_in_view(end, outward, np.minimum(steps, reach), ranges, centre)
     # How far off the wall's line what the camera saw stands (a wardrobe's side seen at a
     # slant is metres nearer along the ray, a furniture's depth off the line).
     off_line = (distance - seen) * np.abs(offset @ np.array([-outward[1], outward[0]])) / distance
@@ -626,10 +635,7 @@ def _wall_hiding(
     steps = np.arange(0.0, reach, _SIGHT_STEP)[-least:]
     if len(steps) < least:
         return None
-    points = end + steps[:, None] * outward
-    seen = range_towards(ranges, centre, points, _SIGHT_WIDEN)
-    offset = points - centre
-    distance = np.hypot(offset[:, 0], offset[:, 1])
+    offset, distance, seen = _line_in_view(end, outward, steps, ranges, centre)
     if not np.all(distance - seen >= _ACROSS_NEARER):  # NaN: nothing seen that way
         return None
     run = (centre + (seen / distance)[:, None] * offset - end) @ outward

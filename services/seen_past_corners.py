@@ -171,7 +171,9 @@ def _contradicted(kp: FloatArray, i: int, lines: Sequence[WallLine]) -> Keep | N
     contradicted, else None.
 
     A left turn (the room's inner corner) with the wall before it seen on behind the next
-    wall, or the next wall seen from behind the wall before it: the larger part ("larger").
+    wall, or the next wall seen from behind the wall before it (``_PAST``, or
+    ``_PAST_UNSEEN`` when the other wall is not seen at the corner): the larger part
+    ("larger").
     A right turn (a reflex corner) with the wall before it seen on past it while the next is
     first seen from behind its line (a seen wall, not one deduced across what the camera
     did not see): the part before ("before"); and the other way round ("after").
