@@ -60,6 +60,7 @@ _MAX_EXTENSION = 3.0  # m, farthest a chain end is moved out to the frustum's ed
 _SIGHT_STEP = 0.05  # m, spacing of the points a chain end's move is checked in sight at
 _SIGHT_WIDEN = 2  # view-range bins either side a nearer reading must cover to hide the line
 _SIGHT_HIDDEN = 0.3  # m, least stretch of the line hidden that stops a chain end's move
+_SIGHT_LEAST = int(np.ceil(_SIGHT_HIDDEN / _SIGHT_STEP))  # that stretch in steps
 _ACROSS_NEARER = 0.2  # m, what hides the line stands at least this much nearer along the ray
 _ACROSS_SPREAD = 0.1  # m, most its run coordinate varies over that stretch: a surface across
 _MIN_TURN = 0.3  # m, least length of a wall the chain's last wall turns onto (a reveal is less)
@@ -603,9 +604,8 @@ def _in_sight(
     # slant is metres nearer along the ray, a furniture's depth off the line).
     off_line = (distance - seen) * np.abs(offset @ np.array([-outward[1], outward[0]])) / distance
     hidden = off_line > MAX_FURNITURE_DEPTH  # NaN: not hidden
-    least = int(np.ceil(_SIGHT_HIDDEN / _SIGHT_STEP))
-    runs = np.convolve(hidden.astype(np.int64), np.ones(least, dtype=np.int64), "valid")
-    first = np.flatnonzero(runs == least)
+    runs = np.convolve(hidden.astype(np.int64), np.ones(_SIGHT_LEAST, dtype=np.int64), "valid")
+    first = np.flatnonzero(runs == _SIGHT_LEAST)
     return float(min(steps[first[0]], reach)) if len(first) else reach
 
 
@@ -630,10 +630,9 @@ def _wall_hiding(
     move, which :func:`_in_sight` stops only behind what stands a furniture's depth off the
     line.
     """
-    least = int(np.ceil(_SIGHT_HIDDEN / _SIGHT_STEP))
     # Short of the frustum's edge: the bins there hold the edge of the view.
-    steps = np.arange(0.0, reach, _SIGHT_STEP)[-least:]
-    if len(steps) < least:
+    steps = np.arange(0.0, reach, _SIGHT_STEP)[-_SIGHT_LEAST:]
+    if len(steps) < _SIGHT_LEAST:
         return None
     offset, distance, seen = _line_in_view(end, outward, steps, ranges, centre)
     if not np.all(distance - seen >= _ACROSS_NEARER):  # NaN: nothing seen that way

@@ -183,24 +183,20 @@ def _contradicted(kp: FloatArray, i: int, lines: Sequence[WallLine]) -> Keep | N
     a, b = run_axis(before), run_axis(after)
     forward = 1 if before[a] > 0 else -1
     backward = -1 if after[b] > 0 else 1
+    if turn == 0.0:
+        return None
+    line_before = wall_line_of(lines, kp[i - 1], kp[i], seen_only=True)
+    line_after = wall_line_of(lines, kp[i], kp[i + 1], seen_only=True)
     if turn > 0.0:
         past_before, past_after = _past(lines, kp[i], a, forward), _past(lines, kp[i], b, backward)
         if max(past_before, past_after) >= _PAST:
             return "larger"
         # The wall seen on farther past the corner, and the other one (whose line it crosses).
         if past_before >= past_after:
-            past, other = past_before, wall_line_of(lines, kp[i], kp[i + 1], seen_only=True)
-            far = kp[i + 1]
+            past, unseen = past_before, _first_seen(line_after, kp[i], kp[i + 1])
         else:
-            past, other = past_after, wall_line_of(lines, kp[i - 1], kp[i], seen_only=True)
-            far = kp[i - 1]
-        if past >= _PAST_UNSEEN and _first_seen(other, kp[i], far) >= _UNSEEN_AT:
-            return "larger"
-        return None
-    if turn == 0.0:
-        return None
-    line_before = wall_line_of(lines, kp[i - 1], kp[i], seen_only=True)
-    line_after = wall_line_of(lines, kp[i], kp[i + 1], seen_only=True)
+            past, unseen = past_after, _first_seen(line_before, kp[i], kp[i - 1])
+        return "larger" if past >= _PAST_UNSEEN and unseen >= _UNSEEN_AT else None
     if (
         line_before is not None
         and seen_past(line_before, kp[i], forward) >= _PAST_REFLEX
