@@ -70,7 +70,7 @@ def candidate_result(
     by_id = {p.id: p for p in pieces}
     chains = [by_id[fid] for fid in cand.order]
     translations = translations_of(pieces, cand)
-    refined = refine_translations(chains, cand.rotations, translations, params)
+    refined = refine_translations(chains, cand.rotations, translations, params, shared=cand.shared)
     if refined.status == "solved" or refined.status.startswith("relaxed"):
         translations = refined.translations
     fragments = [
@@ -82,7 +82,7 @@ def candidate_result(
         }
         for k, (fid, rotation) in enumerate(zip(cand.order, cand.rotations, strict=True))
     ]
-    polygon = build_polygon(chains, cand.rotations, translations)
+    polygon = build_polygon(chains, cand.rotations, translations, cand.shared)
     return {
         "fragments": fragments,
         "floorplan": {"rooms": [{"id": "r", "polygon": polygon.tolist()}]},

@@ -296,6 +296,13 @@ class PlacementParams(_Frozen):
     closure_tolerance: float = Field(
         0.05, gt=0, description="largest gap left in the loop after refinement, m"
     )
+    share_corners: bool = Field(
+        True,
+        description="RGB-D frames: a junction may join two pieces that both saw the same "
+        "corner (the next piece starts before the corner the last one turned): the corners "
+        "coincide and the walls either side overlap, instead of a hidden corner the other "
+        "way (services.placement.corners)",
+    )
     top_k: int = Field(24, ge=1, description="assemblies kept by the search")
     energy_window: float = Field(
         6.0,

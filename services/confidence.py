@@ -120,7 +120,8 @@ def same_room_groups(
     placements: list[dict[str, tuple[int, FloatArray]]] = []
     for cand in candidates:
         moved = translations_of(pieces, cand)
-        polygon = build_polygon([by_id[fid] for fid in cand.order], cand.rotations, moved)
+        ordered = [by_id[fid] for fid in cand.order]
+        polygon = build_polygon(ordered, cand.rotations, moved, cand.shared)
         placed = _placements(cand, moved)
         match = next(
             (
@@ -201,7 +202,9 @@ def room_slack(
     guess however clear the assembly is."""
     by_id = {p.id: p for p in pieces}
     ordered = [by_id[fid] for fid in candidate.order]
-    spread = translation_spread(ordered, candidate.rotations, params, measured, prior_sigmas)
+    spread = translation_spread(
+        ordered, candidate.rotations, params, measured, prior_sigmas, candidate.shared
+    )
     return spread / max(_RIGHT_SHARE * floorplan_diagonal(polygon), 1e-6)
 
 

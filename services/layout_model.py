@@ -10,6 +10,7 @@ from numpy.typing import NDArray
 
 from services.geometry import signed_area
 from services.placement import Piece, rot90
+from services.placement.corners import corner_offsets, corner_view
 from services.types import FloatArray
 
 __all__ = ["LayoutMesh", "build_polygon", "layout_mesh"]
@@ -62,7 +63,10 @@ def _junction(
 
 
 def build_polygon(
-    pieces: Sequence[Piece], rotations: Sequence[int], translations: FloatArray
+    pieces: Sequence[Piece],
+    rotations: Sequence[int],
+    translations: FloatArray,
+    shared: Sequence[bool] = (),
 ) -> FloatArray:
     """The room boundary from the placed chains: (V, 2) float64, site frame, CCW.
 
@@ -71,7 +75,12 @@ def build_polygon(
     pieces : chains in loop order.
     rotations : quarter turns per piece.
     translations : (n, 2) site position of each piece's source.
+    shared : per loop position, whether the piece joins the one before at a shared corner
+        (``PlacementCandidate.shared``): the loop goes on from that corner along it.
     """
+    if any(shared):
+        translations = translations + corner_offsets(pieces, rotations, shared)
+        pieces, _ = corner_view(pieces, shared, {})
     sites = [
         p.keypoints @ rot90(r).T + t
         for p, r, t in zip(pieces, rotations, translations, strict=True)

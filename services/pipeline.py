@@ -205,7 +205,7 @@ def _concrete(
     if cand.missing == 0:
         anchors = prior_anchors(hints, cand, translations)
         refined = refine_translations(
-            ordered, cand.rotations, translations, params.placement, measured, anchors
+            ordered, cand.rotations, translations, params.placement, measured, anchors, cand.shared
         )
     else:
         # An open chain is already joined end to end; there is no loop to refine.
@@ -219,7 +219,7 @@ def _concrete(
         and not refined.status.startswith("fallback")
         and refined.violation_after <= params.placement.closure_tolerance
     ):
-        polygon = build_polygon(ordered, cand.rotations, refined.translations)
+        polygon = build_polygon(ordered, cand.rotations, refined.translations, cand.shared)
     rectilinear = polygon is not None and is_simple_rectilinear(polygon)
     return _Placed(assembly, cand, refined, poses, polygon, rectilinear)
 
@@ -245,6 +245,7 @@ def _trusted_sigmas(
         params.placement,
         placement.measured,
         anchors,
+        best.shared,
     )
     return {
         fid: anchor.sigma
@@ -264,9 +265,15 @@ def _poses(
 
 
 def _gap(ordered: Sequence[Piece], cand: PlacementCandidate, translations: FloatArray) -> float:
-    """Manhattan length of the gap left at the loop's end before refinement, m."""
-    end = translations[-1] + rot90(cand.rotations[-1]) @ ordered[-1].keypoints[-1]
-    return float(np.abs(end).sum())
+    """Manhattan length of the gap left at the loop's end before refinement, m (from the
+    first piece's first corner back along the last piece's last wall where the loop closes
+    at a shared corner)."""
+    last = ordered[-1].keypoints
+    end = translations[-1] + rot90(cand.rotations[-1]) @ last[-1]
+    if cand.shared and cand.shared[0]:
+        end = end - rot90(cand.rotations[-1]) @ (last[-1] - last[-2])
+        end = end - rot90(cand.rotations[0]) @ ordered[0].keypoints[1]
+    return float(np.abs(end - translations[0]).sum())
 
 
 def _gap_limit(ordered: Sequence[Piece], cand: PlacementCandidate, params: PipelineParams) -> float:
@@ -569,7 +576,9 @@ def _slid_rooms(
         return []
     cand = main.candidate
     ordered = [pieces[fid] for fid in cand.order]
-    move = widest_slide(ordered, cand.rotations, params.placement, measured, prior_sigmas)
+    move = widest_slide(
+        ordered, cand.rotations, params.placement, measured, prior_sigmas, cand.shared
+    )
     sure = main.assembly.probability
     doubt = min((1.0 - sure) / 2.0, sure)  # never likelier than the main room
     share = params.placement.same_room_share
@@ -580,7 +589,7 @@ def _slid_rooms(
     out = []
     for sign in (1.0, -1.0):
         translations = main.refinement.translations + sign * _SLIDE_SIGMAS * move
-        polygon = build_polygon(ordered, cand.rotations, translations)
+        polygon = build_polygon(ordered, cand.rotations, translations, cand.shared)
         if not is_simple_rectilinear(polygon) or (
             same_room(polygon, main.polygon, share) and not moved
         ):

@@ -42,6 +42,7 @@ from scipy import sparse
 
 from schemas.params import PlacementParams
 from services.placement import Piece, PlacementCandidate, rot90
+from services.placement.corners import corner_offsets, corner_view
 from services.placement.energy import JunctionNoise, junction_displacement
 from services.placement.evidence import end_voxels, register_ends
 from services.placement.pieces import UNIT
@@ -308,6 +309,19 @@ def measured_shifts(
     return out
 
 
+def _measured_by_pair(
+    pieces: Sequence[Piece], rotations: Sequence[int]
+) -> dict[tuple[str, str], float]:
+    """:func:`measured_shifts` registered here, by ordered pair of ids."""
+    n = len(pieces)
+    shifts = measured_shifts(pieces, rotations)
+    return {
+        (pieces[i].id, pieces[(i + 1) % n].id): shift
+        for i, shift in enumerate(shifts)
+        if shift is not None
+    }
+
+
 def refine_translations(
     pieces: Sequence[Piece],
     rotations: Sequence[int],
@@ -315,6 +329,7 @@ def refine_translations(
     params: PlacementParams = PlacementParams(),
     measured: Mapping[tuple[str, str], float] | None = None,
     anchors: Sequence[Anchor | None] = (),
+    shared: Sequence[bool] = (),
 ) -> Refinement:
     """Refine the placement's translations with the constrained QP.
 
@@ -331,7 +346,20 @@ def refine_translations(
     measured : the overlaps the placement measured (``Placement.measured``); None: measure.
     anchors : prior positions of the pieces' sources, loop order (None: no prior); used
         where two pieces or more have one.
+    shared : per loop position, whether the piece joins the one before at a shared corner
+        (``PlacementCandidate.shared``): refined as a straight junction whose overlap is
+        the earlier piece's wall after the corner (:func:`corner_view`).
     """
+    if any(shared):
+        offsets = corner_offsets(pieces, rotations, shared)
+        known = measured if measured is not None else _measured_by_pair(pieces, rotations)
+        view, known = corner_view(pieces, shared, known)
+        moved = [
+            None if a is None else replace(a, position=a.position + offset)
+            for a, offset in zip(anchors, offsets, strict=False)
+        ]
+        refined = refine_translations(view, rotations, translations + offsets, params, known, moved)
+        return replace(refined, translations=refined.translations - offsets)
     n = len(pieces)
     if n < 2:
         return Refinement(translations.copy(), "solved", 0.0, 0.0)
@@ -446,6 +474,7 @@ def translation_spread(
     params: PlacementParams = PlacementParams(),
     measured: Mapping[tuple[str, str], float] | None = None,
     prior_sigmas: Mapping[str, float] | None = None,
+    shared: Sequence[bool] = (),
 ) -> float:
     """How far the junctions (and priors) leave the pieces free to move: the root mean
     square, over the pieces in loop order (the first fixed), of the standard deviation of
@@ -459,12 +488,12 @@ def translation_spread(
 
     ``prior_sigmas``: the standard deviation (m) of each hinted piece's prior position by
     id. Two priors or more pin the pieces relative to each other (the hints' frame itself
-    is free), whatever the junctions leave loose.
+    is free), whatever the junctions leave loose. ``shared``: see :func:`refine_translations`.
     """
     n = len(pieces)
     if n < 2:
         return 0.0
-    covariance = _covariance(pieces, rotations, params, measured, prior_sigmas)
+    covariance = _covariance(pieces, rotations, params, measured, prior_sigmas, shared)
     return float(np.sqrt(np.trace(covariance) / n))
 
 
@@ -474,14 +503,16 @@ def widest_slide(
     params: PlacementParams = PlacementParams(),
     measured: Mapping[tuple[str, str], float] | None = None,
     prior_sigmas: Mapping[str, float] | None = None,
+    shared: Sequence[bool] = (),
 ) -> FloatArray:
     """(n, 2) the move of every piece (the first stays) one standard deviation along the
     direction the junction model leaves the loosest: how the room most likely differs
-    from the refined one when its size is a guess (see :func:`translation_spread`)."""
+    from the refined one when its size is a guess (see :func:`translation_spread`;
+    ``shared``: see :func:`refine_translations`)."""
     n = len(pieces)
     if n < 2:
         return np.zeros((n, 2))
-    covariance = _covariance(pieces, rotations, params, measured, prior_sigmas)
+    covariance = _covariance(pieces, rotations, params, measured, prior_sigmas, shared)
     values, vectors = np.linalg.eigh(covariance)
     move = vectors[:, -1] * np.sqrt(max(float(values[-1]), 0.0))
     return np.vstack([np.zeros(2), move.reshape(n - 1, 2)])
@@ -493,12 +524,16 @@ def _covariance(
     params: PlacementParams,
     measured: Mapping[tuple[str, str], float] | None,
     prior_sigmas: Mapping[str, float] | None = None,
+    shared: Sequence[bool] = (),
 ) -> FloatArray:
     """(2n - 2, 2n - 2) covariance of the pieces' positions after the first under the
     junction model (the QP's least-squares rows; the first piece is the frame) and the
     hinted pieces' prior positions. The priors' frame is an unknown offset of its own, so a
     lone prior pins nothing; its yaw is taken as known (a linearisation: the priors'
     angles are far surer than what they say of a piece's position)."""
+    if any(shared):
+        known = measured if measured is not None else _measured_by_pair(pieces, rotations)
+        pieces, measured = corner_view(pieces, shared, known)
     sites = [p.keypoints @ rot90(r).T for p, r in zip(pieces, rotations, strict=True)]
     shifts = measured_shifts(pieces, rotations, measured)
     sigmas = prior_sigmas or {}

@@ -125,7 +125,9 @@ def refined_cameras(
     ordered = [by_id[fid] for fid in cand.order]
     start = translations_of(pieces, cand)
     anchors = prior_anchors(hints, cand, start) if hints is not None else []
-    refined = refine_translations(ordered, cand.rotations, start, params, measured, anchors)
+    refined = refine_translations(
+        ordered, cand.rotations, start, params, measured, anchors, cand.shared
+    )
     return placed_cameras(ordered, cand.rotations, refined.translations)
 
 

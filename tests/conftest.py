@@ -134,15 +134,22 @@ def point_at_arc(polygon: np.ndarray, arc: float) -> np.ndarray:
 
 
 def chains_from_polygon(
-    polygon: np.ndarray, cuts: list[float], rotations: list[int]
+    polygon: np.ndarray,
+    cuts: list[float],
+    rotations: list[int],
+    ends: list[float] | None = None,
 ) -> list[Piece]:
     """Cut a CCW polygon's boundary at arc positions into wall chains, each turned by a
-    quarter-turn count and moved so its source is at the origin (as a fragment would be)."""
+    quarter-turn count and moved so its source is at the origin (as a fragment would be).
+    ``ends``: where each chain ends (arc positions past its start, up to a loop further;
+    default the next cut): past the next cut, neighbours overlap."""
     _, cum = _perimeter(polygon)
     total = cum[-1]
     pieces = []
     for k, start in enumerate(cuts):
         end = cuts[(k + 1) % len(cuts)] + (total if k == len(cuts) - 1 else 0.0)
+        if ends is not None:
+            end = ends[k]
         corners = [
             polygon[i % len(polygon)]
             for i, c in enumerate(np.concatenate([cum[:-1], cum[:-1] + total]))

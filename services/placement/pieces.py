@@ -219,7 +219,23 @@ class Piece:
     @cached_property
     def length(self) -> float:
         """Total wall length, m."""
-        return float(np.abs(np.diff(self.keypoints, axis=0)).sum())
+        return float(self.wall_lengths.sum())
+
+    @cached_property
+    def wall_lengths(self) -> FloatArray:
+        """(K-1,) length of each wall, m."""
+        lengths: FloatArray = np.abs(np.diff(self.keypoints, axis=0)).sum(axis=1)
+        return lengths
+
+    @cached_property
+    def first_turn(self) -> int:
+        """The chain's first corner: +1 left, -1 right, 0 for a single wall."""
+        return _turn_sign(self.directions[:2])
+
+    @cached_property
+    def last_turn(self) -> int:
+        """The chain's last corner: +1 left, -1 right, 0 for a single wall."""
+        return _turn_sign(self.directions[-2:])
 
     @cached_property
     def rotated(self) -> tuple[tuple[FloatArray, FloatArray, FloatArray], ...]:
@@ -244,6 +260,13 @@ class Piece:
     def rotated_free_centres(self) -> tuple[FloatArray, ...]:
         """Per quarter turn r: the free cells' centres turned by r (exact on the grid)."""
         return tuple(self.free.centres @ rot90(r).T for r in range(4))
+
+
+def _turn_sign(directions: Sequence[int]) -> int:
+    """+1 when the two wall directions turn left, -1 right, 0 otherwise (or one wall)."""
+    if len(directions) < 2:
+        return 0
+    return {1: 1, 3: -1}.get((directions[1] - directions[0]) % 4, 0)
 
 
 def make_piece(fragment_id: str, layout: LocalLayout) -> Piece:

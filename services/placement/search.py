@@ -1,10 +1,12 @@
 """Global placement search: loop order and rotations of the pieces (paper 3.2).
 
 Depth-first branch and bound. The first piece is fixed (rotation 0, source at the origin);
-each step appends a piece at the previous one's target. What a simple rectilinear
-counter-clockwise loop implies cuts the tree: a junction continues the wall or turns by 90
-degrees (never folds back), so a rotation follows from the junction's turn; the turns add
-up to one full turn; walls may not cross or overlap. A child's lower bound adds what its
+each step appends a piece at the previous one's target (or, between RGB-D frames that both
+saw one corner, with its first corner on the previous one's last: a shared corner,
+:mod:`services.placement.corners`). What a simple rectilinear counter-clockwise loop implies
+cuts the tree: a junction continues the wall or turns by 90 degrees (never folds back), so
+a rotation follows from the junction's turn; the turns add up to one full turn; walls may
+not cross or overlap (but where a shared corner makes them). A child's lower bound adds what its
 junction costs, the cheapest way into every piece still to place, the turns still owed and
 the closure gap the remaining pieces cannot make up. Up to 16 pieces the junctions and turns
 still to come are bounded by the cheapest tour through the pieces left instead, where that
@@ -37,6 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from schemas.params import PlacementParams
+from services.placement.corners import corner_shift, shareable
 from services.placement.energy import (
     FEATURES,
     JunctionNoise,
@@ -49,6 +52,7 @@ from services.placement.energy import (
 from services.placement.evidence import boundary_mismatch, end_voxels, register_ends
 from services.placement.pieces import (
     SAMPLE_SPACING,
+    UNIT,
     Box,
     Piece,
     open_end_count,
@@ -107,7 +111,10 @@ class PlacementCandidate:
     """A complete placement, its energy and the features it is the weighted sum of.
 
     order: piece ids in loop order (the first is the fixed piece); rotations: quarter turns
-    per piece, loop order; missing: pieces left out (open chains only).
+    per piece, loop order; missing: pieces left out (open chains only); shared: per loop
+    position, whether that piece follows the one before at a shared corner
+    (:mod:`services.placement.corners`; position 0: the junction closing the loop), empty
+    when none does.
     """
 
     energy: float
@@ -116,6 +123,7 @@ class PlacementCandidate:
     features: Mapping[str, float]
     missing: int = 0
     violated_pairs: tuple[HintPair, ...] = ()
+    shared: tuple[bool, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -176,14 +184,29 @@ class _Search:
     turned_rotation_cost: FloatArray = field(init=False)
     rotation_floor: FloatArray = field(init=False)  # [j]: least prior cost of j's rotations
     reach: FloatArray = field(init=False)  # [j, d]: piece j's reach along direction d
+    # Shared corners (services.placement.corners): [a, b] whether b may follow a at one;
+    # each piece's first and last wall's length; how much further than ``reach`` a piece
+    # may reach when shared junctions cut its walls at either end (``reach_far``), at its
+    # target alone (``back_reach``); and the loop's start moves when its closing junction
+    # shares the first piece's first corner (``close_reach``).
+    shareable: NDArray[np.bool_] = field(init=False)
+    first_len: FloatArray = field(init=False)
+    last_len: FloatArray = field(init=False)
+    reach_far: FloatArray = field(init=False)
+    back_reach: FloatArray = field(init=False)
+    close_reach: float = field(init=False)
     chain_ends: FloatArray = field(init=False)  # [j, r]: piece j's target at rotation r
     # [j]: piece j's quarter turns along its chain, directions of its first and last walls.
     turning: NDArray[np.intp] = field(init=False)
     first_direction: NDArray[np.intp] = field(init=False)
+    first_sign: NDArray[np.intp] = field(init=False)  # [j]: Piece.first_turn
+    last_sign: NDArray[np.intp] = field(init=False)  # [j]: Piece.last_turn
     last_direction: NDArray[np.intp] = field(init=False)
     # (4, 4, 2, 2) [heading in, heading out]: mean (2,) and variance (2,) of a junction's
     # displacement.
     step: FloatArray = field(init=False)
+    # (2,) variance of a shared corner's displacement (its mean is 0): both corners' noise.
+    corner_var: FloatArray = field(init=False)
     # Per piece: its prior's source (n, 2), that source's variance (n,), whether it has one.
     prior_source: FloatArray = field(init=False)
     prior_variance: FloatArray = field(init=False)
@@ -225,6 +248,8 @@ class _Search:
         self.rotation_floor = self.rotation_cost.min(axis=1)
         self.turning = np.array([p.turning for p in self.pieces], dtype=np.intp)
         self.first_direction = np.array([p.directions[0] for p in self.pieces], dtype=np.intp)
+        self.first_sign = np.array([p.first_turn for p in self.pieces], dtype=np.intp)
+        self.last_sign = np.array([p.last_turn for p in self.pieces], dtype=np.intp)
         self.last_direction = np.array([p.directions[-1] for p in self.pieces], dtype=np.intp)
         self.step = np.array(
             [
@@ -232,6 +257,7 @@ class _Search:
                 for h_in in range(4)
             ]
         )
+        self.corner_var = np.full(2, self.noise.keypoint_sigma**2 + self.noise.measured_sigma**2)
         priors = [self.hints.priors.get(p.id) for p in self.pieces]
         self.has_prior = np.array([prior is not None for prior in priors], dtype=bool)
         self.prior_source = np.array(
@@ -242,6 +268,19 @@ class _Search:
         )
         ends = [np.stack([rot90(r) @ p.keypoints[-1] for r in range(4)]) for p in self.pieces]
         self.reach = np.array([(_CLOSURE_DIRECTIONS @ e.T).max(axis=1) for e in ends])
+        self.reach = self.reach.reshape(n, len(_CLOSURE_DIRECTIONS))
+        share = self.params.share_corners
+        self.shareable = np.array(
+            [[share and shareable(a, b) for b in self.pieces] for a in self.pieces], dtype=bool
+        ).reshape(n, n)
+        self.first_len = np.array([p.wall_lengths[0] for p in self.pieces]).reshape(n)
+        self.last_len = np.array([p.wall_lengths[-1] for p in self.pieces]).reshape(n)
+        # A direction u of the closure bound has max-norm 1: cutting a wall of length L off
+        # a chain moves its end by at most L along u.
+        self.back_reach = np.where(self.shareable.any(axis=1), self.last_len, 0.0)
+        entered = np.where(self.shareable.any(axis=0), self.first_len, 0.0)
+        self.reach_far = self.reach + (self.back_reach + entered)[:, None]
+        self.close_reach = float(entered[0]) if n else 0.0
         # Open ends (services.open_ends) each widen their junction's hidden displacement
         # alike on both axes; every assembly joins every end, so the search starts with it.
         self.open_var = open_end_count(self.pieces) * self.noise.open_sigma**2
@@ -298,7 +337,8 @@ class _Search:
         return min(-self.top[0][0], window)
 
     def record(self, cand: PlacementCandidate) -> None:
-        if any(c.order == cand.order and c.rotations == cand.rotations for _, _, c in self.top):
+        key = (cand.order, cand.rotations, cand.shared)
+        if any((c.order, c.rotations, c.shared) == key for _, _, c in self.top):
             return  # found again by a later, wider pass
         self.lowest = min(self.lowest, cand.energy)
         item = (-cand.energy, next(self.counter), cand)
@@ -429,6 +469,7 @@ class _State:
     rotation_prior: FloatArray = field(default_factory=lambda: np.zeros(4))
     anchors: tuple[tuple[float, float, float, float, float], ...] = ()  # priors.position_costs
     position: FloatArray = field(default_factory=lambda: np.zeros(4))  # their costs, (4,)
+    shared: tuple[bool, ...] = (False,)  # per placed piece: entered at a shared corner
 
     def energy(self, weights: FloatArray) -> float:
         return float(weights @ self.features)
@@ -493,25 +534,30 @@ class _Placed(NamedTuple):
 
 
 def _children_walls(
-    search: _Search,
-    placed: _Placed,
-    parent: NDArray[np.intp],
-    piece: NDArray[np.intp],
-    rotation: NDArray[np.intp],
+    search: _Search, placed: _Placed, children: _Children, rows: NDArray[np.intp] | slice
 ) -> tuple[FloatArray, NDArray[np.bool_]]:
-    """:func:`_crosses` for many children at once: child c places piece[c] at rotation[c]
-    after the state ``parent[c]`` of ``placed``. Returns (C, W, 4) each child's walls where
-    it lies (NaN rows past the piece's count; the same numbers as ``shift_walls``) and (C,)
-    whether they cross their parent's placed walls. One set of array operations instead of
-    one per child: the test's cost is mostly per call."""
-    ends = placed.ends[parent]
+    """:func:`_crosses` for many children at once, those ``rows`` of ``children`` (of the
+    states ``placed``): child c places piece[c] at rotation[c] after the state parent[c],
+    its source at source[c] (past a shared corner: :func:`_past_corner`). Returns (C, W, 4)
+    each child's walls where it lies (NaN rows past the piece's count; the same numbers as
+    ``shift_walls`` and :func:`_past_corner`) and (C,) whether they cross their parent's
+    placed walls. One set of array operations instead of one per child: the test's cost is
+    mostly per call."""
+    parent, piece, rotation = children.parent[rows], children.piece[rows], children.rotation[rows]
+    source, overlap = children.source[rows], children.overlap[rows]
     walls = search.wall_table[piece, rotation]  # (C, W, 4), a copy (fancy indexing)
     along_x = walls[:, :, 0] == 0.0
-    sx, sy = ends[:, 0:1], ends[:, 1:2]
+    sx, sy = source[:, 0:1], source[:, 1:2]
     walls[:, :, 1] += np.where(along_x, sy, sx)
     run = np.where(along_x, sx, sy)
     walls[:, :, 2] += run
     walls[:, :, 3] += run
+    for c in np.flatnonzero(~np.isnan(overlap)).tolist():
+        j, count = int(piece[c]), int(search.wall_count[piece[c]])
+        corner = search.pieces[j].rotated[int(rotation[c])][0][1] + source[c]
+        kept = _past_corner(walls[c, :count], corner, float(overlap[c]))
+        walls[c] = np.nan
+        walls[c, : count - 1] = kept
     others = placed.walls[parent]  # (C, P, 4)
     # (C, W, 1) against (C, 1, P)
     crosses = _crossing(walls.transpose(2, 0, 1)[..., None], others.transpose(2, 0, 1)[:, :, None])
@@ -531,6 +577,28 @@ def _trim_start(walls: FloatArray, start: FloatArray, length: float) -> FloatArr
     return out
 
 
+def _walls_clear(
+    search: _Search, state: _State, j: int, rotation: int, source: FloatArray, shared: bool
+) -> FloatArray | None:
+    """Piece j's walls at ``rotation`` with its source at ``source`` (at a shared corner as
+    :func:`_past_corner` cuts them), or None when they cross the state's walls
+    (:func:`_crosses_closed` for the piece that closes the loop)."""
+    pts, local_walls, _ = search.pieces[j].rotated[rotation]
+    walls = shift_walls(local_walls, source)
+    if shared:
+        walls = _past_corner(walls, pts[1] + source, float(search.last_len[state.order[-1]]))
+    if _crosses(walls, state.walls) and _crosses_closed(search, state, walls, pts[-1] + source):
+        return None
+    return walls
+
+
+def _past_corner(walls: FloatArray, corner: FloatArray, overlap: float) -> FloatArray:
+    """The walls of a piece entered at a shared corner, as tested for crossing: its first
+    wall (on the last piece's wall before the corner) dropped, its second cut where the last
+    piece's wall after the corner ends, ``overlap`` past the corner."""
+    return _trim_start(walls[1:], corner, overlap)
+
+
 def _conflict(
     search: _Search,
     state: _State,
@@ -539,8 +607,10 @@ def _conflict(
     samples: FloatArray,
     box: Box,
     drift: tuple[FloatArray, FloatArray],
+    source: FloatArray,
 ) -> float:
-    """Meters of wall through space another scan saw empty, for piece j joining the state.
+    """Meters of wall through space another scan saw empty, for piece j joining the state
+    with its source at ``source``.
 
     j's walls (``samples``, site frame, bounded by ``box``) are tested against every placed
     piece's free space and the placed walls against j's, each in the piece's own frame
@@ -582,8 +652,8 @@ def _conflict(
         placed_margins = margins[state.owners]
         pad = float(np.abs(shifts).max())
     x0, y0, x1, y1 = state.box
-    if _meets((x0 - pad, y0 - pad, x1 + pad, y1 + pad), free.box, state.end):
-        hits += free.hits(placed_samples - state.end, placed_margins)
+    if _meets((x0 - pad, y0 - pad, x1 + pad, y1 + pad), free.box, source):
+        hits += free.hits(placed_samples - source, placed_margins)
     return hits * SAMPLE_SPACING
 
 
@@ -634,38 +704,45 @@ def _extend(
     turn: int,
     position: FloatArray | None = None,
     walls: FloatArray | None = None,
+    shared: bool = False,
 ) -> _State | None:
     """The state with piece j appended after a junction that turns by ``turn``, or None
     when its walls would cross the placed ones (:func:`_crosses_closed` for the piece that
     closes the loop). ``position``: the child's position costs when already known
     (:func:`_children`); ``walls``: the child's walls where it lies, when already known to
-    cross nothing (:func:`_children_walls`)."""
+    cross nothing (:func:`_children_walls`); ``shared``: the junction shares the last
+    piece's last corner (:mod:`services.placement.corners`)."""
     piece = search.pieces[j]
+    prev = state.order[-1]
     rotation = (state.heading + turn - piece.directions[0]) % 4
-    local_pts, local_walls, local_samples = piece.rotated[rotation]
-    pts = local_pts + state.end
+    local_pts, _, local_samples = piece.rotated[rotation]
+    source = state.end
+    if shared:
+        source = source + corner_shift(search.pieces[prev], state.rotations[-1], piece, rotation)
+    pts = local_pts + source
     if walls is None:
-        walls = shift_walls(local_walls, state.end)
-        if _crosses(walls, state.walls) and _crosses_closed(search, state, walls, pts[-1]):
+        walls = _walls_clear(search, state, j, rotation, source, shared)
+        if walls is None:
             return None
-    samples = local_samples + state.end
+    samples = local_samples + source
     heading_out = (piece.directions[0] + rotation) % 4
     mean, var = search.step[state.heading, heading_out]
+    if shared:
+        mean, var = np.zeros(2), search.corner_var
     drift_mean, drift_var = state.mean + mean, state.var + var  # hidden displacement so far
-    prev = state.order[-1]
     features = state.features.copy()
     features[_F["turns"]] += turn != 0
     features[_F["structure"]] += search.structure[prev, j]
     features[_F["boundary"]] += search.boundary[prev, j]
-    # Shifting every sample by the end shifts their bounds by it (rounding is monotone).
+    # Shifting every sample by the source shifts their bounds by it (rounding is monotone).
     x0, y0, x1, y1 = piece.sample_boxes[rotation]
-    ex, ey = state.end.tolist()
+    ex, ey = source.tolist()
     box = (x0 + ex, y0 + ey, x1 + ex, y1 + ey)
     box_shift = (ex, ey, ex, ey)
     drift = (drift_mean, drift_var)
-    features[_F["conflict"]] += _conflict(search, state, j, rotation, samples, box, drift)
+    features[_F["conflict"]] += _conflict(search, state, j, rotation, samples, box, drift, source)
     rotations_cost = state.rotation_prior + search.turned_rotation_cost[j, rotation]
-    anchor = _anchor(search, j, state.end, drift_mean, drift_var)
+    anchor = _anchor(search, j, source, drift_mean, drift_var)
     anchors = state.anchors if anchor is None else (*state.anchors, anchor)
     if anchor is None:
         position = state.position
@@ -681,7 +758,7 @@ def _extend(
     child = _State(
         order=(*state.order, j),
         rotations=(*state.rotations, rotation),
-        sources=np.concatenate([state.sources, state.end[None]]),
+        sources=np.concatenate([state.sources, source[None]]),
         end=pts[-1],
         heading=(piece.directions[-1] + rotation) % 4,
         turning=state.turning + turn + piece.turning,
@@ -701,6 +778,7 @@ def _extend(
         rotation_prior=rotations_cost,
         anchors=anchors,
         position=position,
+        shared=(*state.shared, shared),
     )
     if search.pairs:
         violated, resolved = _resolve_pairs(search, child, {})
@@ -726,6 +804,7 @@ def _leaf(search: _Search, state: _State, cap: float = np.inf) -> PlacementCandi
         return None
     features = state.features.copy()
     violated = state.violated
+    closes_shared = False
     if not missing and closed_ok:
         last = state.order[-1]
         features[_F["turns"]] += turn != 0
@@ -733,6 +812,13 @@ def _leaf(search: _Search, state: _State, cap: float = np.inf) -> PlacementCandi
         features[_F["boundary"]] += search.boundary[last, 0]
         mean, var = search.step[state.heading, first.directions[0]]
         features[_F["closure"]] = closure_nll(state.end, state.mean + mean, state.var + var)
+        if search.shareable[last, 0] and turn == -first.first_turn:
+            # Or the loop closes at a shared corner: the last piece's last corner is the
+            # first piece's first (its source lies back along its first wall).
+            corner = state.end - (state.vertices[-1] - state.vertices[-2]) - first.keypoints[1]
+            shared_nll = closure_nll(corner, state.mean, state.var + search.corner_var)
+            closes_shared = shared_nll < features[_F["closure"]]
+            features[_F["closure"]] = min(features[_F["closure"]], shared_nll)
         if search.pairs:
             violated, _ = _resolve_pairs(search, state, {last: 0})
     penalty = _UNPLACED_PENALTY * missing + search.params.hint_pair_cost * len(violated)
@@ -745,7 +831,10 @@ def _leaf(search: _Search, state: _State, cap: float = np.inf) -> PlacementCandi
     ids = tuple(search.pieces[i].id for i in state.order)
     pairs = tuple(search.hints.pairs[k] for k in violated) if search.hints.pairs else ()
     named = dict(zip(FEATURES, features.tolist(), strict=True))
-    return PlacementCandidate(energy, ids, state.rotations, named, missing, pairs)
+    shared = (closes_shared, *state.shared[1:])
+    return PlacementCandidate(
+        energy, ids, state.rotations, named, missing, pairs, shared if any(shared) else ()
+    )
 
 
 def _dfs(
@@ -807,7 +896,10 @@ def _place_group(
         if children.bound[c] >= search.threshold() or search.out_of_budget():
             return group, queue[taken:], True
         position = None if children.position is None else children.position[c]
-        child = _extend(search, state, int(children.piece[c]), int(children.turn[c]), position)
+        shared = bool(children.shared[c])
+        child = _extend(
+            search, state, int(children.piece[c]), int(children.turn[c]), position, None, shared
+        )
         if child is not None:
             group.append((c, child))
     return group, [], False
@@ -844,16 +936,14 @@ def _beam(search: _Search, root: _State, width: int) -> None:
                 continue  # known before paying for its geometry
             if i >= checked:
                 chunk = ranked[i : i + width - len(layer) + _BEAM_SPARE]
-                walls, crosses = _children_walls(
-                    search, placed, children.parent[chunk], children.piece[chunk],
-                    children.rotation[chunk],
-                )  # fmt: skip
+                walls, crosses = _children_walls(search, placed, children, chunk)
                 first, checked = i, i + len(chunk)
-            own = walls[i - first, : search.wall_count[j]]
+            shared = bool(children.shared[c])
+            own = walls[i - first, : search.wall_count[j] - shared]
             if crosses[i - first] and _crosses_closed(search, state, own, children.end[c]):
                 continue
             position = None if children.position is None else children.position[c]
-            child = _extend(search, state, j, turns[c], position, own)
+            child = _extend(search, state, j, turns[c], position, own, shared)
             assert child is not None  # its walls cross nothing
             seen.add(key)
             layer.append(child)
@@ -874,6 +964,14 @@ class _Children:
     end: FloatArray  # (C, 2) the piece's target
     bound: FloatArray  # the least energy any leaf below the child can have
     position: FloatArray | None  # with priors: (C, 4) position costs (see _child_priors)
+    source: FloatArray  # (C, 2) the piece's source
+    # At a shared corner: how far the last piece's wall runs past it; NaN elsewhere.
+    overlap: FloatArray
+
+    @property
+    def shared(self) -> NDArray[np.bool_]:
+        """(C,) whether the child joins at a shared corner."""
+        return ~np.isnan(self.overlap)
 
     def of(self, k: int) -> _Children:
         """The children of the batch's k-th state, as a batch of its own."""
@@ -887,6 +985,8 @@ class _Children:
             self.end[lo:hi],
             self.bound[lo:hi],
             None if self.position is None else self.position[lo:hi],
+            self.source[lo:hi],
+            self.overlap[lo:hi],
         )
 
 
@@ -919,11 +1019,22 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
         allowed = np.repeat(remaining[:, :, None], len(_TURNS), axis=2)
     parent, piece, option = np.nonzero(allowed)
     turn = turn_options[option]
+    sharing = remaining & search.shareable[last]
+    owed = np.abs(4 - turning[:, None] + search.first_sign[None, :])  # turns still owed after
+    sharing &= (owed <= left[:, None]) | (not search.require_closed)
+    parent, piece, turn, shared = _with_shared(search, sharing, parent, piece, turn)
     rotation = (heading[parent] + turn - search.first_direction[piece]) % 4
-    child_end = ends[parent] + search.chain_ends[piece, rotation]
+    heading_in = (heading[parent] + turn) % 4
+    overlap = np.where(shared, search.last_len[last[parent]], np.nan)
+    # A shared corner: back along the last piece's last wall, then along the child's first.
+    corner = np.nan_to_num(overlap)[:, None] * UNIT[heading[parent]]
+    corner += np.where(shared, search.first_len[piece], 0.0)[:, None] * UNIT[heading_in]
+    source = ends[parent] - corner
+    child_end = source + search.chain_ends[piece, rotation]
     child_heading = (search.last_direction[piece] + rotation) % 4
     # The hidden displacement up to each child's source, with its junction's.
-    entering = search.step[heading[parent], (heading[parent] + turn) % 4]
+    entering = search.step[heading[parent], heading_in]
+    entering[shared, 0], entering[shared, 1] = 0.0, search.corner_var
     drift_mean, drift_var = mean[parent] + entering[:, 0], var[parent] + entering[:, 1]
 
     # Cheapest way into each piece left and into the loop's start, from a piece that can
@@ -943,8 +1054,10 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
 
     # Closure: the gap the pieces left cannot make up (L1, by duality), against the largest
     # variance the remaining junctions could add (Cauchy-Schwarz: |r|_1^2 <= sum r^2/v sum v).
-    reach = np.where(remaining[:, :, None], search.reach[None], 0.0).sum(axis=1)
-    others = reach[parent] - search.reach[piece]
+    # Shared corners still to come may each cut a wall off a piece: its far reach.
+    reach = np.where(remaining[:, :, None], search.reach_far[None], 0.0).sum(axis=1)
+    others = reach[parent] - search.reach_far[piece] + search.back_reach[piece, None]
+    others = others + search.close_reach
     gaps = np.maximum(0.0, (child_end @ _AWAY_FROM_START - others).max(axis=1))
     junctions_left = left + 1
     shift = max(abs(noise.straight_mean), 2 * abs(noise.turn_mean))
@@ -1010,10 +1123,34 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
             return out
 
         own, position = _child_priors(
-            search, states, parent, piece, rotation, ends[parent], drift_mean, drift_var, with_own
+            search, states, parent, piece, rotation, source, drift_mean, drift_var, with_own
         )
         bound = with_own(own)
-    return _Children(parent, piece, turn, rotation, child_heading, child_end, bound, position)
+    return _Children(
+        parent, piece, turn, rotation, child_heading, child_end, bound, position, source, overlap
+    )
+
+
+def _with_shared(
+    search: _Search,
+    sharing: NDArray[np.bool_],
+    parent: NDArray[np.intp],
+    piece: NDArray[np.intp],
+    turn: NDArray[np.intp],
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]]:
+    """The children (parent, piece, turn) with those at a shared corner added, for each
+    state and piece ``sharing`` (count, n) allows, and whether each is one; still sorted by
+    parent (:meth:`_Children.of` slices by it). A shared corner's junction turns back the
+    way both pieces' corners turn."""
+    s_parent, s_piece = np.nonzero(sharing)
+    if not len(s_parent):
+        return parent, piece, turn, np.zeros(len(parent), dtype=bool)
+    parent = np.concatenate([parent, s_parent])
+    piece = np.concatenate([piece, s_piece])
+    turn = np.concatenate([turn, -search.first_sign[s_piece]])
+    shared = np.arange(len(parent)) >= len(parent) - len(s_parent)
+    by_parent = np.argsort(parent, kind="stable")
+    return parent[by_parent], piece[by_parent], turn[by_parent], shared[by_parent]
 
 
 def _tour(search: _Search) -> FloatArray:
@@ -1047,15 +1184,17 @@ def _tour(search: _Search) -> FloatArray:
 @dataclass(frozen=True)
 class _Finishing:
     """What each step of a loop's last few junctions adds, by the heading h before it, the
-    piece k it appends and its turn t (index into _TURNS); piece index n is "no piece", a
-    step that changes nothing (t = 0 only), so that loops with fewer pieces left share the
-    arrays. See :func:`_finishing_cost`."""
+    piece k it appends and its junction t: an index into _TURNS, or 3 for a shared corner
+    (:mod:`services.placement.corners`; the turn back the way the piece's first corner
+    turns, its shift less the last piece's last wall, which :func:`_finishing_cost` adds);
+    piece index n is "no piece", a step that changes nothing (t = 0 only), so that loops
+    with fewer pieces left share the arrays. See :func:`_finishing_cost`."""
 
-    shift: FloatArray  # (4, n + 1, 3, 2) the piece's end offset plus the junction's mean
-    var: FloatArray  # (4, n + 1, 3, 2) the junction's variance
-    heading: NDArray[np.intp]  # (4, n + 1, 3) heading after the piece
-    gain: NDArray[np.intp]  # (n + 1, 3) quarter turns the junction and the piece add
-    cost: FloatArray  # (n + 1, 3) the turn's energy (inf for "no piece" turning)
+    shift: FloatArray  # (4, n + 1, 4, 2) the piece's end offset plus the junction's mean
+    var: FloatArray  # (4, n + 1, 4, 2) the junction's variance
+    heading: NDArray[np.intp]  # (4, n + 1, 4) heading after the piece
+    gain: NDArray[np.intp]  # (n + 1, 4) quarter turns the junction and the piece add
+    cost: FloatArray  # (n + 1, 4) the turn's energy (inf for "no piece" turning)
     junction: FloatArray  # (n + 1, n + 1) search.junction; 0 into "no piece"
     # Closing the loop into the first piece from heading h: (4, 2) mean, (4, 2) variance,
     # (4,) quarter turns (99 where it would fold back) and (4,) the turn's energy.
@@ -1065,24 +1204,30 @@ class _Finishing:
     close_cost: FloatArray
 
 
+_SHARED = 3  # a _Finishing step's junction index for a shared corner
+
+
 def _finishing(search: _Search) -> _Finishing:
     n, w_turn = len(search.pieces), search.weights[_F["turns"]]
-    turns = np.array(_TURNS)
-    h = np.arange(4)[:, None, None]
-    k = np.arange(n)[None, :, None]
-    heading_in = (h + turns) % 4  # (4, 1, 3)
-    rotation = (heading_in - search.first_direction[k]) % 4  # (4, n, 3)
-    step = search.step[h, heading_in]  # (4, 1, 3, 2, 2)
-    shift = np.zeros((4, n + 1, 3, 2))
-    shift[:, :n] = search.chain_ends[k, rotation] + step[..., 0, :]
-    var = np.zeros((4, n + 1, 3, 2))
+    k = np.arange(n)
+    turns = np.broadcast_to(np.append(_TURNS, 0), (n, 4)).copy()  # (n, 4) per piece
+    turns[:, _SHARED] = -search.first_sign
+    heading_in = (np.arange(4)[:, None, None] + turns[None]) % 4  # (4, n, 4)
+    rotation = (heading_in - search.first_direction[k, None]) % 4
+    step = search.step[np.arange(4)[:, None, None], heading_in]  # (4, n, 4, 2, 2)
+    step[:, :, _SHARED, 0], step[:, :, _SHARED, 1] = 0.0, search.corner_var
+    shift = np.zeros((4, n + 1, 4, 2))
+    shift[:, :n] = search.chain_ends[k[:, None], rotation] + step[..., 0, :]
+    shift[:, :n, _SHARED] -= search.first_len[:, None] * UNIT[heading_in[:, :, _SHARED]]
+    var = np.zeros((4, n + 1, 4, 2))
     var[:, :n] = step[..., 1, :]
-    heading = np.repeat(np.arange(4)[:, None, None], n + 1, axis=1).repeat(3, axis=2)
-    heading[:, :n] = (search.last_direction[k] + rotation) % 4
-    gain = np.zeros((n + 1, 3), dtype=np.intp)
+    heading = np.repeat(np.arange(4)[:, None, None], n + 1, axis=1).repeat(4, axis=2)
+    heading[:, :n] = (search.last_direction[k, None] + rotation) % 4
+    gain = np.zeros((n + 1, 4), dtype=np.intp)
     gain[:n] = turns + search.turning[:, None]
-    cost = np.full((n + 1, 3), np.inf)
+    cost = np.full((n + 1, 4), np.inf)
     cost[:n] = w_turn * (turns != 0)
+    cost[:n, _SHARED] = np.where(search.shareable.any(axis=0), w_turn, np.inf)
     cost[n, 0] = 0.0
     junction = np.zeros((n + 1, n + 1))
     junction[:n, :n] = search.junction
@@ -1111,8 +1256,8 @@ def _finishing_cost(
     left: NDArray[np.bool_],
 ) -> FloatArray:
     """(C,) the least cost of turns, junctions and closure over every way to finish each
-    child's loop (both orders and every turn of the at most two pieces left; inf when none
-    closes), as :func:`_extend` and :func:`_close` add them up from the child's end on.
+    child's loop (both orders and every junction of the at most two pieces left; inf when
+    none closes), as :func:`_extend` and :func:`_close` add them up from the child's end on.
     Walls are not tested for crossing, so it is a lower bound of the energy still to come.
 
     facts: (C, 3) heading, turns so far and last piece; values: (C, 6) end, mean and
@@ -1122,10 +1267,10 @@ def _finishing_cost(
     padded = np.sort(np.where(left, np.arange(n), n), axis=1)[:, :2]  # n >= 2 (a child exists)
     orders = padded[:, [[0, 1], [1, 0]]]  # (C, 2 orders, 2 steps)
     k1, k2 = orders[:, :, 0, None, None], orders[:, :, 1, None, None]  # (C, 2, 1, 1)
-    t1, t2 = np.arange(3)[:, None], np.arange(3)  # (3, 1) and (3,)
+    t1, t2 = np.arange(4)[:, None], np.arange(4)  # (4, 1) and (4,)
     h0 = facts[:, 0, None, None, None]
-    h1 = table.heading[h0, k1, t1]  # (C, 2, 3, 1)
-    h2 = table.heading[h1, k2, t2]  # (C, 2, 3, 3)
+    h1 = table.heading[h0, k1, t1]  # (C, 2, 4, 1)
+    h2 = table.heading[h1, k2, t2]  # (C, 2, 4, 4)
     last0 = facts[:, 2, None, None, None]
     last1 = np.where(k1 == n, last0, k1)
     last2 = np.where(k2 == n, last1, k2)
@@ -1136,12 +1281,39 @@ def _finishing_cost(
     start = values[:, None, None, None, 0:2] + values[:, None, None, None, 2:4]
     residual = start + table.shift[h0, k1, t1] + table.shift[h1, k2, t2] + table.close_shift[h2]
     var = values[:, None, None, None, 4:6] + table.var[h0, k1, t1] + table.var[h1, k2, t2]
-    var = var + table.close_var[h2]
-    closure = 0.5 * np.sum(residual**2 / var + np.log(var), axis=-1)
+    if search.shareable.any():
+        # A shared corner's step also goes back along the last piece's last wall, and only
+        # follows a piece it may share a corner with.
+        share = np.zeros((n + 1, n + 1), dtype=bool)
+        share[:n, :n] = search.shareable
+        back = np.append(search.last_len, 0.0)
+        residual = residual - np.where(
+            (t1 == _SHARED)[..., None], back[last0][..., None] * UNIT[h0], 0.0
+        )
+        residual = residual - np.where(
+            (t2 == _SHARED)[..., None], back[last1][..., None] * UNIT[h1], 0.0
+        )
+        cost = cost + np.where((t1 == _SHARED) & ~share[last0, k1], np.inf, 0.0)
+        cost = cost + np.where((t2 == _SHARED) & ~share[last1, k2], np.inf, 0.0)
+    closure = _closure_nll(residual, var + table.close_var[h2])
+    if search.shareable[:, 0].any():
+        # The loop may close at a shared corner of the first piece instead.
+        first = search.pieces[0]
+        shared_close = share[last2, 0] & (table.close_gain[h2] == -first.first_turn)
+        back_close = back[last2][..., None] * UNIT[h2] + first.keypoints[1]
+        residual = residual - table.close_shift[h2] - back_close
+        shared_nll = _closure_nll(residual, var + search.corner_var)
+        closure = np.where(shared_close, np.minimum(closure, shared_nll), closure)
     total = cost + search.weights[_F["closure"]] * closure
     total[facts[:, 1, None, None, None] + gain != 4] = np.inf
     least: FloatArray = total.reshape(len(total), -1).min(axis=1)
     return least
+
+
+def _closure_nll(residual: FloatArray, var: FloatArray) -> FloatArray:
+    """:func:`closure_nll` over the leading axes of (..., 2) residuals and variances."""
+    nll: FloatArray = 0.5 * np.sum(residual**2 / var + np.log(var), axis=-1)
+    return nll
 
 
 def _child_priors(
@@ -1381,7 +1553,8 @@ def _closed_then_open(
         search = _Search(list(pieces), params, hints, require_closed, evidence, frame_yaw)
         if require_closed:
             for cand in known:
-                state = _placed_loop(search, [search.index[i] for i in cand.order], cand.rotations)
+                order = [search.index[i] for i in cand.order]
+                state = _placed_loop(search, order, cand.rotations, cand.shared)
                 if state is not None:
                     _close(search, state)
         _explore(search)
@@ -1443,29 +1616,39 @@ def _restart(search: _Search, j: int) -> int:
         order = [index[fid] for fid in (*cand.order[k:], *cand.order[:k])]
         turns = cand.rotations[k:] + cand.rotations[:k]
         rotations = [(r - turns[0]) % 4 for r in turns]
-        state = _placed_loop(search, order, rotations)
+        state = _placed_loop(search, order, rotations, cand.shared[k:] + cand.shared[:k])
         if state is not None:
             _close(search, state)
     return other.nodes
 
 
-def _placed_loop(search: _Search, order: Sequence[int], rotations: Sequence[int]) -> _State | None:
+def _placed_loop(
+    search: _Search, order: Sequence[int], rotations: Sequence[int], shared: Sequence[bool] = ()
+) -> _State | None:
     """The state of the pieces ``order`` (indices, the first piece first) at quarter turns
-    ``rotations`` laid end to end, or None where a junction folds back or walls cross."""
+    ``rotations`` laid end to end (``shared``: see :attr:`PlacementCandidate.shared`; the
+    closing junction's is the leaf's to choose), or None where a junction folds back or
+    cannot share its corner, or walls cross."""
     root = _root(search)
-    laid = _laid_after(search, root, order[1:], rotations[1:])
+    laid = _laid_after(search, root, order[1:], rotations[1:], shared[1:])
     return None if laid is None else (laid[-1] if laid else root)
 
 
 def _laid_after(
-    search: _Search, state: _State, order: Sequence[int], rotations: Sequence[int]
+    search: _Search,
+    state: _State,
+    order: Sequence[int],
+    rotations: Sequence[int],
+    shared: Sequence[bool] = (),
 ) -> list[_State] | None:
     """The states of the pieces ``order`` (indices) at quarter turns ``rotations`` laid end
-    to end after ``state``, one per piece (each a search node), or None where a junction
-    folds back or walls cross."""
+    to end after ``state`` (``shared``: per piece, whether it joins at a shared corner;
+    empty: none does), one per piece (each a search node), or None where a junction folds
+    back or cannot share its corner, or walls cross."""
     laid = []
-    for j, rotation in zip(order, rotations, strict=True):
-        extended = _extend_to(search, state, j, rotation)
+    shared = shared or (False,) * len(order)
+    for j, rotation, at_corner in zip(order, rotations, shared, strict=True):
+        extended = _extend_to(search, state, j, rotation, at_corner)
         if extended is None:
             return None
         laid.append(extended)
@@ -1480,26 +1663,43 @@ def _polish(search: _Search, start: PlacementCandidate) -> list[PlacementCandida
     loop placed is also recorded like a leaf of the search.
 
     Moves are tried in order of a lower bound of their energy (:func:`_loop_bounds`): one
-    that cannot beat the best so far is never placed, and most cannot."""
+    that cannot beat the best so far is never placed, and most cannot. A junction the move
+    leaves alone keeps its shared corner; the bound leaves shared corners out."""
     index = search.index
     order = np.array([index[fid] for fid in start.order], dtype=np.intp)
     rotations = np.array(start.rotations, dtype=np.intp)
+    shared = list(start.shared) or [False] * len(order)
     budget = search.nodes + search.params.polish_nodes
     best, better = start, []
     while search.nodes < budget:
         orders, turned = _moves(order, rotations)
         bounds = _loop_bounds(search, orders, turned)
         root = _root(search)
-        laid = _laid_after(search, root, order[1:].tolist(), rotations[1:].tolist())
+        laid = _laid_after(search, root, order[1:].tolist(), rotations[1:].tolist(), shared[1:])
         assert laid is not None  # a loop found before: its walls do not cross
+        placed = zip(order[:-1].tolist(), rotations[:-1].tolist(), strict=True)
+        kept = {
+            (*key, int(order[k]), int(rotations[k])) for k, key in enumerate(placed, 1) if shared[k]
+        }
         prefix = [root, *laid]  # the current loop's states, one per piece placed
         moved = None
         for c in np.argsort(bounds, kind="stable").tolist():
             if bounds[c] >= best.energy or search.nodes >= budget:
                 break
             first = int(np.flatnonzero((orders[c] != order) | (turned[c] != rotations))[0])
+            pairs = zip(
+                orders[c, first - 1 : -1].tolist(), turned[c, first - 1 : -1].tolist(), strict=True
+            )
+            flags = [
+                (*pair, int(orders[c, k]), int(turned[c, k])) in kept
+                for k, pair in enumerate(pairs, first)
+            ]
             laid = _laid_after(
-                search, prefix[first - 1], orders[c, first:].tolist(), turned[c, first:].tolist()
+                search,
+                prefix[first - 1],
+                orders[c, first:].tolist(),
+                turned[c, first:].tolist(),
+                flags,
             )
             leaf = None if laid is None else _leaf(search, laid[-1])  # None: walls cross
             if leaf is None:
@@ -1512,15 +1712,20 @@ def _polish(search: _Search, start: PlacementCandidate) -> list[PlacementCandida
             break
         better.append(best)
         order, rotations = orders[moved], turned[moved]
+        shared = list(best.shared) or [False] * len(order)
     return better
 
 
-def _extend_to(search: _Search, state: _State, j: int, rotation: int) -> _State | None:
+def _extend_to(
+    search: _Search, state: _State, j: int, rotation: int, shared: bool = False
+) -> _State | None:
     """:func:`_extend` with piece j at a given quarter turn (counted as a search node), or
-    None where its junction would fold back."""
+    None where its junction would fold back, or cannot be the shared corner asked for."""
     search.nodes += 1
     turn = int(_TURN_OF[(rotation + search.pieces[j].directions[0] - state.heading) % 4])
-    return None if turn == 2 else _extend(search, state, j, turn)
+    if shared and not (search.shareable[state.order[-1], j] and turn == -search.first_sign[j]):
+        return None
+    return None if turn == 2 else _extend(search, state, j, turn, shared=shared)
 
 
 def _moves(
@@ -1623,7 +1828,7 @@ def _with_outside(search: _Search, cand: PlacementCandidate) -> PlacementCandida
         return cand
     order = tuple(search.index[fid] for fid in cand.order)
     sources = tuple(translations_of(search.pieces, cand))
-    area = _outside(search, order, cand.rotations, sources)
+    area = _outside(search, order, cand.rotations, sources, cand.shared)
     features = {**cand.features, "outside": area}
     return replace(cand, energy=cand.energy + weight * area, features=features)
 
@@ -1633,14 +1838,22 @@ def _outside(
     order: Sequence[int],
     rotations: Sequence[int],
     sources: Sequence[FloatArray],
+    shared: Sequence[bool] = (),
 ) -> float:
     """The ``outside`` feature of a closed loop: the pieces (indices, quarter turns, sources
-    in loop order) with the floor they saw."""
+    in loop order; ``shared``: see :attr:`PlacementCandidate.shared`) with the floor they
+    saw. At a shared corner the loop goes from the corner on along the later piece: the
+    earlier piece's target and the later one's source, either side of it, would cut the
+    corner off."""
     cells, loop = [], []
-    for j, rotation, source in zip(order, rotations, sources, strict=True):
+    n = len(order)
+    shared = shared or (False,) * n
+    for k, (j, rotation, source) in enumerate(zip(order, rotations, sources, strict=True)):
         piece = search.pieces[j]
         cells.append(piece.rotated_free_centres[rotation] + source)
-        loop.append(piece.rotated[rotation][0] + source)
+        first = 1 if shared[k] else 0
+        last = len(piece.keypoints) - (1 if shared[(k + 1) % n] else 0)
+        loop.append(piece.rotated[rotation][0][first:last] + source)
     params = search.params
     cell = search.pieces[0].free.cell
     return outside_area(
@@ -1649,11 +1862,16 @@ def _outside(
 
 
 def translations_of(pieces: Sequence[Piece], cand: PlacementCandidate) -> FloatArray:
-    """(n, 2) site position of each piece's source after end-to-end concatenation."""
+    """(n, 2) site position of each piece's source after end-to-end concatenation (a piece
+    that joins at a shared corner with that corner on the last piece's)."""
     by_id: Mapping[str, Piece] = {p.id: p for p in pieces}
     end = np.zeros(2)
     out = []
-    for fid, rotation in zip(cand.order, cand.rotations, strict=True):
+    shared = cand.shared or (False,) * len(cand.order)
+    for k, (fid, rotation) in enumerate(zip(cand.order, cand.rotations, strict=True)):
+        if k and shared[k]:
+            prev, prev_rotation = by_id[cand.order[k - 1]], cand.rotations[k - 1]
+            end = end + corner_shift(prev, prev_rotation, by_id[fid], rotation)
         out.append(end.copy())
         end = end + by_id[fid].keypoints[-1] @ rot90(rotation).T
     return np.asarray(out).reshape(-1, 2)
@@ -1666,21 +1884,42 @@ def evaluate_placement(
     params: PlacementParams = PlacementParams(),
     hints: SiteHints | None = None,
     frame_yaw: float | None = None,
+    shared: Sequence[bool] | None = None,
 ) -> PlacementCandidate | None:
     """Energy of one given closed placement, or None when it is not a valid closed loop.
 
     The same energy the search minimises; used to check the search against brute force,
     to score the truth in benchmarks and a placement a user proposes. frame_yaw: the hints
     frame's yaw to score prior poses in (:attr:`Placement.frame_yaw`); None: the priors'
-    own estimate.
+    own estimate. shared: which junctions join at a shared corner (see
+    :attr:`PlacementCandidate.shared`); None: the placement of least energy over every
+    choice the pieces allow (at most ``_EVALUATED_SHARES`` junctions are tried both ways).
     """
     by_id = {p.id: i for i, p in enumerate(pieces)}
     if order[0] != pieces[0].id or rotations[0] != 0 or sorted(order) != sorted(by_id):
         return None
-    one = params.model_copy(update={"top_k": 1})
-    search = _Search(list(pieces), one, hints or SiteHints(), True, None, frame_yaw)
-    state = _placed_loop(search, [by_id[fid] for fid in order], rotations)
-    if state is None:
-        return None
-    _close(search, state)
-    return _with_outside(search, search.top[0][2]) if search.top else None
+    search = _Search(list(pieces), params, hints or SiteHints(), True, None, frame_yaw)
+    led = [by_id[fid] for fid in order]
+    if shared is not None:
+        choices: list[Sequence[bool]] = [shared]
+    else:
+        may = [k for k in range(1, len(led)) if search.shareable[led[k - 1], led[k]]]
+        may = may[:_EVALUATED_SHARES]
+        choices = []
+        for picked in itertools.product((False, True), repeat=len(may)):
+            chosen = [False] * len(led)
+            for k, flag in zip(may, picked, strict=True):
+                chosen[k] = flag
+            choices.append(chosen)
+    best = None
+    for flags in choices:
+        state = _placed_loop(search, led, rotations, flags)
+        leaf = None if state is None else _leaf(search, state)
+        if leaf is not None:
+            leaf = _with_outside(search, leaf)
+            if best is None or leaf.energy < best.energy:
+                best = leaf
+    return best
+
+
+_EVALUATED_SHARES = 8  # junctions evaluate_placement tries both ways, at most

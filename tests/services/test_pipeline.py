@@ -863,3 +863,32 @@ def test_a_room_whose_search_ran_out_of_nodes_is_not_said_closed() -> None:
     assert result.confidence == pytest.approx(short.truncated_search_confidence)
     assert result.diagnostics["search_cut_short"] is True
     assert result.floorplan.rooms  # still the best guess
+
+
+def test_frames_that_overlap_across_a_corner_make_the_room_with_that_corner_once():
+    # A 10 x 6 m room seen by three frames; the second starts 1.5 m before the corner the
+    # first turned 2 m before its end. The floorplan has the corner once, and each frame's
+    # pose puts its chain on the room's walls.
+    frame = ManhattanFrame(rotation=np.eye(3), floor_z=0.0, ceiling_z=2.7)
+    chains = {
+        "a": np.array([[1.0, 0.0], [10.0, 0.0], [10.0, 2.0]]),
+        "b": np.array([[8.5, 0.0], [10.0, 0.0], [10.0, 6.0], [4.0, 6.0]]),
+        # Overlapping its neighbours by 0.2 m, as the refinement expects unmeasured.
+        "c": np.array([[4.2, 6.0], [0.0, 6.0], [0.0, 0.0], [1.2, 0.0]]),
+    }
+    layouts = {
+        fid: LocalLayout(keypoints=kp - kp[0], frame=frame, evidence="frame")
+        for fid, kp in chains.items()
+    }
+    result = place_site(layouts)
+    assert result.status in ("closed", "ambiguous")
+    polygon = np.array(result.floorplan.rooms[0].polygon)
+    assert abs(signed_area(polygon)) == pytest.approx(60.0, rel=0.02)
+    assert len(polygon) == 4
+    # In the site frame, a's source is at the origin: every chain lies where the room has
+    # it relative to a's.
+    for fragment in result.fragments:
+        pose = np.array(fragment.pose)
+        local = layouts[fragment.id].keypoints
+        placed = local @ pose[:2, :2].T + pose[:2, 3]
+        assert placed == pytest.approx(chains[fragment.id] - chains["a"][0], abs=0.05)

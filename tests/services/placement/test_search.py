@@ -636,9 +636,7 @@ def test_the_beams_wall_test_is_each_childs_own():
                 states.append(child)
     children = search_module._children(search, states)
     placed = search_module._Placed.of(states)
-    walls, crosses = search_module._children_walls(
-        search, placed, children.parent, children.piece, children.rotation
-    )
+    walls, crosses = search_module._children_walls(search, placed, children, slice(None))
     for c in range(len(children.piece)):
         state, j = states[int(children.parent[c])], int(children.piece[c])
         own = shift_walls(pieces[j].rotated[int(children.rotation[c])][1], state.end)
