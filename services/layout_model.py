@@ -66,7 +66,7 @@ def build_polygon(
     pieces: Sequence[Piece],
     rotations: Sequence[int],
     translations: FloatArray,
-    shared: Sequence[bool] = (),
+    shared: Sequence[int] = (),
 ) -> FloatArray:
     """The room boundary from the placed chains: (V, 2) float64, site frame, CCW.
 
@@ -75,8 +75,8 @@ def build_polygon(
     pieces : chains in loop order.
     rotations : quarter turns per piece.
     translations : (n, 2) site position of each piece's source.
-    shared : per loop position, whether the piece joins the one before at a shared corner
-        (``PlacementCandidate.shared``): the loop goes on from that corner along it.
+    shared : per loop position, how many corners the piece shares with the one before
+        (``PlacementCandidate.shared``): the loop goes on from the last of them along it.
     """
     if any(shared):
         translations = translations + corner_offsets(pieces, rotations, shared)

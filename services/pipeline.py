@@ -272,7 +272,7 @@ def _gap(ordered: Sequence[Piece], cand: PlacementCandidate, translations: Float
     end = translations[-1] + rot90(cand.rotations[-1]) @ last[-1]
     if cand.shared and cand.shared[0]:
         end = end - rot90(cand.rotations[-1]) @ (last[-1] - last[-2])
-        end = end - rot90(cand.rotations[0]) @ ordered[0].keypoints[1]
+        end = end - rot90(cand.rotations[0]) @ ordered[0].keypoints[cand.shared[0]]
     return float(np.abs(end - translations[0]).sum())
 
 

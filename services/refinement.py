@@ -329,7 +329,7 @@ def refine_translations(
     params: PlacementParams = PlacementParams(),
     measured: Mapping[tuple[str, str], float] | None = None,
     anchors: Sequence[Anchor | None] = (),
-    shared: Sequence[bool] = (),
+    shared: Sequence[int] = (),
 ) -> Refinement:
     """Refine the placement's translations with the constrained QP.
 
@@ -346,9 +346,9 @@ def refine_translations(
     measured : the overlaps the placement measured (``Placement.measured``); None: measure.
     anchors : prior positions of the pieces' sources, loop order (None: no prior); used
         where two pieces or more have one.
-    shared : per loop position, whether the piece joins the one before at a shared corner
+    shared : per loop position, how many corners the piece shares with the one before
         (``PlacementCandidate.shared``): refined as a straight junction whose overlap is
-        the earlier piece's wall after the corner (:func:`corner_view`).
+        the earlier piece's wall after the last of them (:func:`corner_view`).
     """
     if any(shared):
         offsets = corner_offsets(pieces, rotations, shared)
@@ -474,7 +474,7 @@ def translation_spread(
     params: PlacementParams = PlacementParams(),
     measured: Mapping[tuple[str, str], float] | None = None,
     prior_sigmas: Mapping[str, float] | None = None,
-    shared: Sequence[bool] = (),
+    shared: Sequence[int] = (),
 ) -> float:
     """How far the junctions (and priors) leave the pieces free to move: the root mean
     square, over the pieces in loop order (the first fixed), of the standard deviation of
@@ -503,7 +503,7 @@ def widest_slide(
     params: PlacementParams = PlacementParams(),
     measured: Mapping[tuple[str, str], float] | None = None,
     prior_sigmas: Mapping[str, float] | None = None,
-    shared: Sequence[bool] = (),
+    shared: Sequence[int] = (),
 ) -> FloatArray:
     """(n, 2) the move of every piece (the first stays) one standard deviation along the
     direction the junction model leaves the loosest: how the room most likely differs
@@ -524,7 +524,7 @@ def _covariance(
     params: PlacementParams,
     measured: Mapping[tuple[str, str], float] | None,
     prior_sigmas: Mapping[str, float] | None = None,
-    shared: Sequence[bool] = (),
+    shared: Sequence[int] = (),
 ) -> FloatArray:
     """(2n - 2, 2n - 2) covariance of the pieces' positions after the first under the
     junction model (the QP's least-squares rows; the first piece is the frame) and the

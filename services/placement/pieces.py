@@ -228,14 +228,10 @@ class Piece:
         return lengths
 
     @cached_property
-    def first_turn(self) -> int:
-        """The chain's first corner: +1 left, -1 right, 0 for a single wall."""
-        return _turn_sign(self.directions[:2])
-
-    @cached_property
-    def last_turn(self) -> int:
-        """The chain's last corner: +1 left, -1 right, 0 for a single wall."""
-        return _turn_sign(self.directions[-2:])
+    def turns(self) -> tuple[int, ...]:
+        """Each corner of the chain in order: +1 turning left, -1 right."""
+        steps = np.diff(np.asarray(self.directions)) % 4
+        return tuple(int(t) for t in np.where(steps == 1, 1, -1))
 
     @cached_property
     def rotated(self) -> tuple[tuple[FloatArray, FloatArray, FloatArray], ...]:
@@ -260,13 +256,6 @@ class Piece:
     def rotated_free_centres(self) -> tuple[FloatArray, ...]:
         """Per quarter turn r: the free cells' centres turned by r (exact on the grid)."""
         return tuple(self.free.centres @ rot90(r).T for r in range(4))
-
-
-def _turn_sign(directions: Sequence[int]) -> int:
-    """+1 when the two wall directions turn left, -1 right, 0 otherwise (or one wall)."""
-    if len(directions) < 2:
-        return 0
-    return {1: 1, 3: -1}.get((directions[1] - directions[0]) % 4, 0)
 
 
 def make_piece(fragment_id: str, layout: LocalLayout) -> Piece:

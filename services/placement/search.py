@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from schemas.params import PlacementParams
-from services.placement.corners import corner_shift, shareable
+from services.placement.corners import MOST_SHARED, corner_shift, shared_turn, sharings
 from services.placement.energy import (
     FEATURES,
     JunctionNoise,
@@ -112,8 +112,8 @@ class PlacementCandidate:
 
     order: piece ids in loop order (the first is the fixed piece); rotations: quarter turns
     per piece, loop order; missing: pieces left out (open chains only); shared: per loop
-    position, whether that piece follows the one before at a shared corner
-    (:mod:`services.placement.corners`; position 0: the junction closing the loop), empty
+    position, how many corners that piece shares with the one before
+    (:mod:`services.placement.corners`; position 0: at the junction closing the loop), empty
     when none does.
     """
 
@@ -123,7 +123,7 @@ class PlacementCandidate:
     features: Mapping[str, float]
     missing: int = 0
     violated_pairs: tuple[HintPair, ...] = ()
-    shared: tuple[bool, ...] = ()
+    shared: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -184,23 +184,29 @@ class _Search:
     turned_rotation_cost: FloatArray = field(init=False)
     rotation_floor: FloatArray = field(init=False)  # [j]: least prior cost of j's rotations
     reach: FloatArray = field(init=False)  # [j, d]: piece j's reach along direction d
-    # Shared corners (services.placement.corners): [a, b] whether b may follow a at one;
-    # each piece's first and last wall's length; how much further than ``reach`` a piece
-    # may reach when shared junctions cut its walls at either end (``reach_far``), at its
-    # target alone (``back_reach``); and the loop's start moves when its closing junction
-    # shares the first piece's first corner (``close_reach``).
-    shareable: NDArray[np.bool_] = field(init=False)
-    first_len: FloatArray = field(init=False)
+    # Shared corners (services.placement.corners): [a, b, k] whether b may follow a
+    # sharing k corners (k = 0 never); [b, k] that junction's turn, and b's corner k at
+    # rotation r ([b, r, k], (2,)); each piece's last wall's length; how much further than
+    # ``reach`` a piece may reach when shared junctions cut walls off either end
+    # (``reach_far``), its target alone (``back_reach``); how far the loop's start moves
+    # at most when its closing junction shares the first piece's corners (``close_reach``);
+    # and the most a junction may turn (``turn_reach``: 2 where two corners turning alike
+    # may be shared, else 1).
+    sharing: NDArray[np.bool_] = field(init=False)
+    shared_turn: NDArray[np.intp] = field(init=False)
+    corner_at: FloatArray = field(init=False)
     last_len: FloatArray = field(init=False)
     reach_far: FloatArray = field(init=False)
     back_reach: FloatArray = field(init=False)
     close_reach: float = field(init=False)
+    turn_reach: int = field(init=False)
+    # The least spread a junction adds to one axis beyond its keypoint noise (a straight
+    # junction's, or a shared corner's measured one where corners may be shared).
+    least_spread: float = field(init=False)
     chain_ends: FloatArray = field(init=False)  # [j, r]: piece j's target at rotation r
     # [j]: piece j's quarter turns along its chain, directions of its first and last walls.
     turning: NDArray[np.intp] = field(init=False)
     first_direction: NDArray[np.intp] = field(init=False)
-    first_sign: NDArray[np.intp] = field(init=False)  # [j]: Piece.first_turn
-    last_sign: NDArray[np.intp] = field(init=False)  # [j]: Piece.last_turn
     last_direction: NDArray[np.intp] = field(init=False)
     # (4, 4, 2, 2) [heading in, heading out]: mean (2,) and variance (2,) of a junction's
     # displacement.
@@ -248,8 +254,6 @@ class _Search:
         self.rotation_floor = self.rotation_cost.min(axis=1)
         self.turning = np.array([p.turning for p in self.pieces], dtype=np.intp)
         self.first_direction = np.array([p.directions[0] for p in self.pieces], dtype=np.intp)
-        self.first_sign = np.array([p.first_turn for p in self.pieces], dtype=np.intp)
-        self.last_sign = np.array([p.last_turn for p in self.pieces], dtype=np.intp)
         self.last_direction = np.array([p.directions[-1] for p in self.pieces], dtype=np.intp)
         self.step = np.array(
             [
@@ -269,18 +273,7 @@ class _Search:
         ends = [np.stack([rot90(r) @ p.keypoints[-1] for r in range(4)]) for p in self.pieces]
         self.reach = np.array([(_CLOSURE_DIRECTIONS @ e.T).max(axis=1) for e in ends])
         self.reach = self.reach.reshape(n, len(_CLOSURE_DIRECTIONS))
-        share = self.params.share_corners
-        self.shareable = np.array(
-            [[share and shareable(a, b) for b in self.pieces] for a in self.pieces], dtype=bool
-        ).reshape(n, n)
-        self.first_len = np.array([p.wall_lengths[0] for p in self.pieces]).reshape(n)
-        self.last_len = np.array([p.wall_lengths[-1] for p in self.pieces]).reshape(n)
-        # A direction u of the closure bound has max-norm 1: cutting a wall of length L off
-        # a chain moves its end by at most L along u.
-        self.back_reach = np.where(self.shareable.any(axis=1), self.last_len, 0.0)
-        entered = np.where(self.shareable.any(axis=0), self.first_len, 0.0)
-        self.reach_far = self.reach + (self.back_reach + entered)[:, None]
-        self.close_reach = float(entered[0]) if n else 0.0
+        self._share_corners()
         # Open ends (services.open_ends) each widen their junction's hidden displacement
         # alike on both axes; every assembly joins every end, so the search starts with it.
         self.open_var = open_end_count(self.pieces) * self.noise.open_sigma**2
@@ -293,6 +286,33 @@ class _Search:
         self.wall_table = _padded([walls for p in self.pieces for _, walls, _ in p.rotated])
         self.wall_table = self.wall_table.reshape(n, 4, *self.wall_table.shape[1:])
         self.wall_count = np.array([len(p.rotated[0][1]) for p in self.pieces], dtype=np.intp)
+
+    def _share_corners(self) -> None:
+        """The shared-corner tables (see the fields)."""
+        n, most = len(self.pieces), MOST_SHARED + 1
+        self.sharing = np.zeros((n, n, most), dtype=bool)
+        if self.params.share_corners:
+            for (a, pa), (b, pb) in itertools.product(enumerate(self.pieces), repeat=2):
+                self.sharing[a, b, list(sharings(pa, pb))] = True
+        self.shared_turn = np.zeros((n, most), dtype=np.intp)
+        self.corner_at = np.zeros((n, 4, most, 2))
+        entered = np.zeros(n)  # the most a piece's source moves when entered at a corner
+        for j, piece in enumerate(self.pieces):
+            for k in np.flatnonzero(self.sharing[:, j].any(axis=0)).tolist():
+                self.shared_turn[j, k] = shared_turn(piece, k)
+                self.corner_at[j, :, k] = [pts[k] for pts, _, _ in piece.rotated]
+                entered[j] = max(entered[j], float(piece.wall_lengths[:k].sum()))
+        self.last_len = np.array([p.wall_lengths[-1] for p in self.pieces]).reshape(n)
+        # A direction u of the closure bound has max-norm 1: cutting walls of length L off
+        # a chain moves its end by at most L along u.
+        self.back_reach = np.where(self.sharing.any(axis=(1, 2)), self.last_len, 0.0)
+        self.reach_far = self.reach + (self.back_reach + entered)[:, None]
+        self.close_reach = float(entered[0]) if n else 0.0
+        turned = np.abs(self.shared_turn)[self.sharing.any(axis=0)]
+        self.turn_reach = max(1, int(turned.max(initial=0)))
+        self.least_spread = self.noise.straight_sigma**2
+        if self.sharing.any():
+            self.least_spread = min(self.least_spread, self.noise.measured_sigma**2)
 
     def pair_evidence(self, led: Sequence[int]) -> _PairEvidence:
         """The pair evidence of the pieces ``led`` (indices), in that order."""
@@ -469,7 +489,7 @@ class _State:
     rotation_prior: FloatArray = field(default_factory=lambda: np.zeros(4))
     anchors: tuple[tuple[float, float, float, float, float], ...] = ()  # priors.position_costs
     position: FloatArray = field(default_factory=lambda: np.zeros(4))  # their costs, (4,)
-    shared: tuple[bool, ...] = (False,)  # per placed piece: entered at a shared corner
+    shared: tuple[int, ...] = (0,)  # per placed piece: corners shared with the one before
 
     def energy(self, weights: FloatArray) -> float:
         return float(weights @ self.features)
@@ -552,12 +572,13 @@ def _children_walls(
     run = np.where(along_x, sx, sy)
     walls[:, :, 2] += run
     walls[:, :, 3] += run
-    for c in np.flatnonzero(~np.isnan(overlap)).tolist():
-        j, count = int(piece[c]), int(search.wall_count[piece[c]])
-        corner = search.pieces[j].rotated[int(rotation[c])][0][1] + source[c]
-        kept = _past_corner(walls[c, :count], corner, float(overlap[c]))
+    corners = children.corners[rows]
+    for c in np.flatnonzero(corners).tolist():
+        j, count, k = int(piece[c]), int(search.wall_count[piece[c]]), int(corners[c])
+        corner = search.corner_at[j, rotation[c], k] + source[c]
+        kept = _past_corner(walls[c, :count], corner, float(overlap[c]), k)
         walls[c] = np.nan
-        walls[c, : count - 1] = kept
+        walls[c, : count - k] = kept
     others = placed.walls[parent]  # (C, P, 4)
     # (C, W, 1) against (C, 1, P)
     crosses = _crossing(walls.transpose(2, 0, 1)[..., None], others.transpose(2, 0, 1)[:, :, None])
@@ -578,25 +599,27 @@ def _trim_start(walls: FloatArray, start: FloatArray, length: float) -> FloatArr
 
 
 def _walls_clear(
-    search: _Search, state: _State, j: int, rotation: int, source: FloatArray, shared: bool
+    search: _Search, state: _State, j: int, rotation: int, source: FloatArray, shared: int
 ) -> FloatArray | None:
-    """Piece j's walls at ``rotation`` with its source at ``source`` (at a shared corner as
-    :func:`_past_corner` cuts them), or None when they cross the state's walls
+    """Piece j's walls at ``rotation`` with its source at ``source`` (sharing ``shared``
+    corners as :func:`_past_corner` cuts them), or None when they cross the state's walls
     (:func:`_crosses_closed` for the piece that closes the loop)."""
     pts, local_walls, _ = search.pieces[j].rotated[rotation]
     walls = shift_walls(local_walls, source)
     if shared:
-        walls = _past_corner(walls, pts[1] + source, float(search.last_len[state.order[-1]]))
+        overlap = float(search.last_len[state.order[-1]])
+        walls = _past_corner(walls, pts[shared] + source, overlap, shared)
     if _crosses(walls, state.walls) and _crosses_closed(search, state, walls, pts[-1] + source):
         return None
     return walls
 
 
-def _past_corner(walls: FloatArray, corner: FloatArray, overlap: float) -> FloatArray:
-    """The walls of a piece entered at a shared corner, as tested for crossing: its first
-    wall (on the last piece's wall before the corner) dropped, its second cut where the last
-    piece's wall after the corner ends, ``overlap`` past the corner."""
-    return _trim_start(walls[1:], corner, overlap)
+def _past_corner(walls: FloatArray, corner: FloatArray, overlap: float, corners: int) -> FloatArray:
+    """The walls of a piece that shares ``corners`` corners with the last one, as tested
+    for crossing: those before its last shared ``corner`` (on the last piece's walls)
+    dropped, the next cut where the last piece's wall after that corner ends, ``overlap``
+    past it."""
+    return _trim_start(walls[corners:], corner, overlap)
 
 
 def _conflict(
@@ -704,21 +727,22 @@ def _extend(
     turn: int,
     position: FloatArray | None = None,
     walls: FloatArray | None = None,
-    shared: bool = False,
+    shared: int = 0,
 ) -> _State | None:
     """The state with piece j appended after a junction that turns by ``turn``, or None
     when its walls would cross the placed ones (:func:`_crosses_closed` for the piece that
     closes the loop). ``position``: the child's position costs when already known
     (:func:`_children`); ``walls``: the child's walls where it lies, when already known to
-    cross nothing (:func:`_children_walls`); ``shared``: the junction shares the last
-    piece's last corner (:mod:`services.placement.corners`)."""
+    cross nothing (:func:`_children_walls`); ``shared``: how many corners the junction
+    shares with the last piece (:mod:`services.placement.corners`)."""
     piece = search.pieces[j]
     prev = state.order[-1]
     rotation = (state.heading + turn - piece.directions[0]) % 4
     local_pts, _, local_samples = piece.rotated[rotation]
     source = state.end
     if shared:
-        source = source + corner_shift(search.pieces[prev], state.rotations[-1], piece, rotation)
+        last = search.pieces[prev]
+        source = source + corner_shift(last, state.rotations[-1], piece, rotation, shared)
     pts = local_pts + source
     if walls is None:
         walls = _walls_clear(search, state, j, rotation, source, shared)
@@ -731,7 +755,7 @@ def _extend(
         mean, var = np.zeros(2), search.corner_var
     drift_mean, drift_var = state.mean + mean, state.var + var  # hidden displacement so far
     features = state.features.copy()
-    features[_F["turns"]] += turn != 0
+    features[_F["turns"]] += abs(turn)  # a shared junction turns back by all its corners
     features[_F["structure"]] += search.structure[prev, j]
     features[_F["boundary"]] += search.boundary[prev, j]
     # Shifting every sample by the source shifts their bounds by it (rounding is monotone).
@@ -796,29 +820,23 @@ def _close(search: _Search, state: _State) -> None:
 def _leaf(search: _Search, state: _State, cap: float = np.inf) -> PlacementCandidate | None:
     """The state as a leaf, or None when it is not one (an open chain in a closed search)
     or its energy reaches ``cap`` (known before its hull is computed)."""
-    first = search.pieces[0]
-    turn = int(_TURN_OF[(first.directions[0] - state.heading) % 4])
-    closed_ok = turn != 2 and state.turning + turn == 4
     missing = len(search.pieces) - len(state.order)
-    if search.require_closed and not closed_ok:
+    closing = _closings(search, state)
+    if search.require_closed and not closing:
         return None
     features = state.features.copy()
     violated = state.violated
-    closes_shared = False
-    if not missing and closed_ok:
+    closes_shared = 0
+    if not missing and closing:
         last = state.order[-1]
-        features[_F["turns"]] += turn != 0
+        weights = search.weights
+        turns, closure, closes_shared = min(
+            closing, key=lambda c: weights[_F["turns"]] * c[0] + weights[_F["closure"]] * c[1]
+        )
+        features[_F["turns"]] += turns
         features[_F["structure"]] += search.structure[last, 0]
         features[_F["boundary"]] += search.boundary[last, 0]
-        mean, var = search.step[state.heading, first.directions[0]]
-        features[_F["closure"]] = closure_nll(state.end, state.mean + mean, state.var + var)
-        if search.shareable[last, 0] and turn == -first.first_turn:
-            # Or the loop closes at a shared corner: the last piece's last corner is the
-            # first piece's first (its source lies back along its first wall).
-            corner = state.end - (state.vertices[-1] - state.vertices[-2]) - first.keypoints[1]
-            shared_nll = closure_nll(corner, state.mean, state.var + search.corner_var)
-            closes_shared = shared_nll < features[_F["closure"]]
-            features[_F["closure"]] = min(features[_F["closure"]], shared_nll)
+        features[_F["closure"]] = closure
         if search.pairs:
             violated, _ = _resolve_pairs(search, state, {last: 0})
     penalty = _UNPLACED_PENALTY * missing + search.params.hint_pair_cost * len(violated)
@@ -835,6 +853,30 @@ def _leaf(search: _Search, state: _State, cap: float = np.inf) -> PlacementCandi
     return PlacementCandidate(
         energy, ids, state.rotations, named, missing, pairs, shared if any(shared) else ()
     )
+
+
+def _closings(search: _Search, state: _State) -> list[tuple[int, float, int]]:
+    """The ways a complete state's loop closes into the first piece: (turns counted, the
+    closure feature, corners shared) for a plain junction and for each that shares the
+    first piece's first corners with the last piece; empty when none closes (the turns do
+    not add up, or the junction would fold back)."""
+    first, last = search.pieces[0], state.order[-1]
+    turn = int(_TURN_OF[(first.directions[0] - state.heading) % 4])
+    out = []
+    if turn != 2 and state.turning + turn == 4:
+        mean, var = search.step[state.heading, first.directions[0]]
+        out.append((abs(turn), closure_nll(state.end, state.mean + mean, state.var + var), 0))
+    for corners in np.flatnonzero(search.sharing[last, 0]).tolist():
+        turn = int(search.shared_turn[0, corners])
+        if (first.directions[0] - state.heading - turn) % 4 or state.turning + turn != 4:
+            continue
+        # The last piece's last corner is the first piece's corner ``corners``: the loop
+        # ends that corner's way along the last wall.
+        end = state.end - (state.vertices[-1] - state.vertices[-2]) - first.keypoints[corners]
+        out.append(
+            (abs(turn), closure_nll(end, state.mean, state.var + search.corner_var), corners)
+        )
+    return out
 
 
 def _dfs(
@@ -896,7 +938,7 @@ def _place_group(
         if children.bound[c] >= search.threshold() or search.out_of_budget():
             return group, queue[taken:], True
         position = None if children.position is None else children.position[c]
-        shared = bool(children.shared[c])
+        shared = int(children.corners[c])
         child = _extend(
             search, state, int(children.piece[c]), int(children.turn[c]), position, None, shared
         )
@@ -938,7 +980,7 @@ def _beam(search: _Search, root: _State, width: int) -> None:
                 chunk = ranked[i : i + width - len(layer) + _BEAM_SPARE]
                 walls, crosses = _children_walls(search, placed, children, chunk)
                 first, checked = i, i + len(chunk)
-            shared = bool(children.shared[c])
+            shared = int(children.corners[c])
             own = walls[i - first, : search.wall_count[j] - shared]
             if crosses[i - first] and _crosses_closed(search, state, own, children.end[c]):
                 continue
@@ -965,13 +1007,9 @@ class _Children:
     bound: FloatArray  # the least energy any leaf below the child can have
     position: FloatArray | None  # with priors: (C, 4) position costs (see _child_priors)
     source: FloatArray  # (C, 2) the piece's source
-    # At a shared corner: how far the last piece's wall runs past it; NaN elsewhere.
+    corners: NDArray[np.intp]  # corners shared with the last piece (0: none)
+    # Sharing corners: how far the last piece's wall runs past the last of them; else NaN.
     overlap: FloatArray
-
-    @property
-    def shared(self) -> NDArray[np.bool_]:
-        """(C,) whether the child joins at a shared corner."""
-        return ~np.isnan(self.overlap)
 
     def of(self, k: int) -> _Children:
         """The children of the batch's k-th state, as a batch of its own."""
@@ -986,6 +1024,7 @@ class _Children:
             self.bound[lo:hi],
             None if self.position is None else self.position[lo:hi],
             self.source[lo:hi],
+            self.corners[lo:hi],
             self.overlap[lo:hi],
         )
 
@@ -1011,25 +1050,27 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
     ends, mean, var, energy = values[:, 0:2], values[:, 2:4], values[:, 4:6], values[:, 6]
     turning = turned + (remaining @ search.turning).astype(np.intp)  # with the pieces left
     turn_options = np.array(_TURNS)
+    # The loop's turns add up to +4; the junctions after this one give at most turn_reach
+    # either way each (+-1 but where two corners may be shared).
+    most = (left * search.turn_reach)[:, None]
     if search.require_closed:
-        # The loop's turns add up to +4; the junctions after this one give +-1 each.
-        turn_allowed = np.abs(4 - turning[:, None] - turn_options) <= left[:, None]
+        turn_allowed = np.abs(4 - turning[:, None] - turn_options) <= most
         allowed = remaining[:, :, None] & turn_allowed[:, None, :]
     else:
         allowed = np.repeat(remaining[:, :, None], len(_TURNS), axis=2)
     parent, piece, option = np.nonzero(allowed)
     turn = turn_options[option]
-    sharing = remaining & search.shareable[last]
-    owed = np.abs(4 - turning[:, None] + search.first_sign[None, :])  # turns still owed after
-    sharing &= (owed <= left[:, None]) | (not search.require_closed)
-    parent, piece, turn, shared = _with_shared(search, sharing, parent, piece, turn)
+    parent, piece, turn, corners = _with_shared(
+        search, remaining, last, turning, most, parent, piece, turn
+    )
+    shared = corners > 0
     rotation = (heading[parent] + turn - search.first_direction[piece]) % 4
     heading_in = (heading[parent] + turn) % 4
     overlap = np.where(shared, search.last_len[last[parent]], np.nan)
-    # A shared corner: back along the last piece's last wall, then along the child's first.
-    corner = np.nan_to_num(overlap)[:, None] * UNIT[heading[parent]]
-    corner += np.where(shared, search.first_len[piece], 0.0)[:, None] * UNIT[heading_in]
-    source = ends[parent] - corner
+    # Shared corners: back along the last piece's last wall, then along the child's chain
+    # from its last shared corner to its source.
+    source = ends[parent] - np.nan_to_num(overlap)[:, None] * UNIT[heading[parent]]
+    source -= search.corner_at[piece, rotation, corners]
     child_end = source + search.chain_ends[piece, rotation]
     child_heading = (search.last_direction[piece] + rotation) % 4
     # The hidden displacement up to each child's source, with its junction's.
@@ -1066,16 +1107,16 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
     total_var = var.sum(axis=1) + junctions_left * worst
     closure = 0.5 * np.maximum(0.0, gaps - slack[parent]) ** 2 / total_var[parent]
     # Every junction left adds the keypoint noise to both axes and at least a straight
-    # junction's spread to one of them; log is concave, so the least sum of logs puts all
-    # of the latter on one axis.
+    # junction's spread to one of them (a shared corner's measured spread, where corners may
+    # be shared); log is concave, so the least sum of logs puts all of the latter on one axis.
     vx = var[:, 0] + junctions_left * noise.keypoint_sigma**2
     vy = var[:, 1] + junctions_left * noise.keypoint_sigma**2
-    spread = junctions_left * noise.straight_sigma**2
+    spread = junctions_left * search.least_spread
     spread_cost = np.minimum(np.log(vx + spread) + np.log(vy), np.log(vx) + np.log(vy + spread))
     closure += 0.5 * spread_cost[parent]
 
     base = energy + weights[_F["hull"]] * 4 + weights[_F["prior"]] * rotation_floor
-    turn_cost = (turn != 0).astype(np.float64)
+    turn_cost = np.abs(turn).astype(np.float64)
     if search.require_closed:
         turn_cost += np.abs(4 - turning[parent] - turn)  # turns still owed
     # The junction into the piece replaces the cheapest way into it counted in entry_total.
@@ -1087,7 +1128,7 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
         # (junctions and turns), a bound of its own: the larger of the two holds.
         bits = 1 << np.arange(n - 1)
         after = (remaining[:, 1:] @ bits)[parent] & ~bits[piece - 1]
-        through = weights[_F["turns"]] * (turn != 0) + search.junction[last[parent], piece]
+        through = weights[_F["turns"]] * np.abs(turn) + search.junction[last[parent], piece]
         through += tour[after, piece, child_heading]
         ahead = np.maximum(ahead, through)
     if search.require_closed:
@@ -1103,7 +1144,7 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
             left_after = remaining[p]
             left_after[np.arange(len(near)), j] = False
             finish = _finishing_cost(search, after, where, left_after)
-            finish += weights[_F["turns"]] * (t != 0) + search.junction[last[p], j]
+            finish += weights[_F["turns"]] * np.abs(t) + search.junction[last[p], j]
             ahead = np.maximum(ahead, finish)
     bound = base[parent] + ahead
     position = None
@@ -1127,30 +1168,40 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
         )
         bound = with_own(own)
     return _Children(
-        parent, piece, turn, rotation, child_heading, child_end, bound, position, source, overlap
-    )
+        parent, piece, turn, rotation, child_heading, child_end, bound, position, source,
+        corners, overlap,
+    )  # fmt: skip
 
 
 def _with_shared(
     search: _Search,
-    sharing: NDArray[np.bool_],
+    remaining: NDArray[np.bool_],
+    last: NDArray[np.intp],
+    turning: NDArray[np.intp],
+    most: NDArray[np.intp],
     parent: NDArray[np.intp],
     piece: NDArray[np.intp],
     turn: NDArray[np.intp],
-) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]]:
-    """The children (parent, piece, turn) with those at a shared corner added, for each
-    state and piece ``sharing`` (count, n) allows, and whether each is one; still sorted by
-    parent (:meth:`_Children.of` slices by it). A shared corner's junction turns back the
-    way both pieces' corners turn."""
-    s_parent, s_piece = np.nonzero(sharing)
-    if not len(s_parent):
-        return parent, piece, turn, np.zeros(len(parent), dtype=bool)
-    parent = np.concatenate([parent, s_parent])
-    piece = np.concatenate([piece, s_piece])
-    turn = np.concatenate([turn, -search.first_sign[s_piece]])
-    shared = np.arange(len(parent)) >= len(parent) - len(s_parent)
-    by_parent = np.argsort(parent, kind="stable")
-    return parent[by_parent], piece[by_parent], turn[by_parent], shared[by_parent]
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]:
+    """The children (parent, piece, turn) with those sharing corners added, and how many
+    each shares (0: none); still sorted by parent (:meth:`_Children.of` slices by it). Per
+    state: the pieces left (count, n), the last piece, the turns with the pieces left and
+    the most the junctions after the child may still turn (count, 1). A junction sharing
+    corners turns back by as much as they turn."""
+    parents, pieces, turns, corners = [parent], [piece], [turn], [np.zeros(len(parent), np.intp)]
+    for k in range(1, MOST_SHARED + 1):
+        sharing = remaining & search.sharing[last, :, k]
+        if search.require_closed:
+            sharing &= np.abs(4 - turning[:, None] - search.shared_turn[None, :, k]) <= most
+        s_parent, s_piece = np.nonzero(sharing)
+        parents.append(s_parent)
+        pieces.append(s_piece)
+        turns.append(search.shared_turn[s_piece, k])
+        corners.append(np.full(len(s_parent), k, dtype=np.intp))
+    if len(parent) == sum(len(p) for p in parents):
+        return parent, piece, turn, corners[0]
+    by_parent = np.argsort(np.concatenate(parents), kind="stable")
+    return tuple(np.concatenate(a)[by_parent] for a in (parents, pieces, turns, corners))  # type: ignore[return-value]
 
 
 def _tour(search: _Search) -> FloatArray:
@@ -1161,6 +1212,12 @@ def _tour(search: _Search) -> FloatArray:
     by their number of pieces (a subset is reached from those one piece smaller)."""
     n, steps = len(search.pieces), search.finishing  # the headings and turns' costs per step
     close_cost = np.where(steps.close_gain == 99, np.inf, steps.close_cost)  # 99: folds back
+    first = search.pieces[0].directions[0]
+    for corners in np.flatnonzero(search.sharing[:, 0].any(axis=0)).tolist():
+        # Closing by sharing the first piece's corners turns back by what they turn.
+        turn = int(search.shared_turn[0, corners])
+        h = (first - turn) % 4
+        close_cost[h] = min(close_cost[h], search.weights[_F["turns"]] * abs(turn))
     masks = np.arange(1 << (n - 1))
     size = np.zeros(len(masks), dtype=np.intp)
     for k in range(n - 1):
@@ -1184,17 +1241,16 @@ def _tour(search: _Search) -> FloatArray:
 @dataclass(frozen=True)
 class _Finishing:
     """What each step of a loop's last few junctions adds, by the heading h before it, the
-    piece k it appends and its junction t: an index into _TURNS, or 3 for a shared corner
-    (:mod:`services.placement.corners`; the turn back the way the piece's first corner
-    turns, its shift less the last piece's last wall, which :func:`_finishing_cost` adds);
-    piece index n is "no piece", a step that changes nothing (t = 0 only), so that loops
-    with fewer pieces left share the arrays. See :func:`_finishing_cost`."""
+    piece k it appends and its junction t: an index into _TURNS, or 2 + c for one sharing c
+    corners (:mod:`services.placement.corners`; its shift leaves out the last piece's last
+    wall, which :func:`_finishing_cost` adds); piece index n is "no piece", a step that
+    changes nothing (t = 0 only), so that loops with fewer pieces left share the arrays."""
 
-    shift: FloatArray  # (4, n + 1, 4, 2) the piece's end offset plus the junction's mean
-    var: FloatArray  # (4, n + 1, 4, 2) the junction's variance
-    heading: NDArray[np.intp]  # (4, n + 1, 4) heading after the piece
-    gain: NDArray[np.intp]  # (n + 1, 4) quarter turns the junction and the piece add
-    cost: FloatArray  # (n + 1, 4) the turn's energy (inf for "no piece" turning)
+    shift: FloatArray  # (4, n + 1, T, 2) the piece's end offset plus the junction's mean
+    var: FloatArray  # (4, n + 1, T, 2) the junction's variance
+    heading: NDArray[np.intp]  # (4, n + 1, T) heading after the piece
+    gain: NDArray[np.intp]  # (n + 1, T) quarter turns the junction and the piece add
+    cost: FloatArray  # (n + 1, T) the turn's energy (inf where there is no such step)
     junction: FloatArray  # (n + 1, n + 1) search.junction; 0 into "no piece"
     # Closing the loop into the first piece from heading h: (4, 2) mean, (4, 2) variance,
     # (4,) quarter turns (99 where it would fold back) and (4,) the turn's energy.
@@ -1204,30 +1260,34 @@ class _Finishing:
     close_cost: FloatArray
 
 
-_SHARED = 3  # a _Finishing step's junction index for a shared corner
+# A _Finishing step's junction: its index and the corners it shares (0: none).
+_STEP_CORNERS = np.array([0] * len(_TURNS) + list(range(1, MOST_SHARED + 1)))
 
 
 def _finishing(search: _Search) -> _Finishing:
     n, w_turn = len(search.pieces), search.weights[_F["turns"]]
-    k = np.arange(n)
-    turns = np.broadcast_to(np.append(_TURNS, 0), (n, 4)).copy()  # (n, 4) per piece
-    turns[:, _SHARED] = -search.first_sign
-    heading_in = (np.arange(4)[:, None, None] + turns[None]) % 4  # (4, n, 4)
+    k, steps = np.arange(n), len(_STEP_CORNERS)
+    turns = np.zeros((n, steps), dtype=np.intp)
+    turns[:, : len(_TURNS)] = _TURNS
+    turns[:, len(_TURNS) :] = search.shared_turn[:, 1:]
+    heading_in = (np.arange(4)[:, None, None] + turns[None]) % 4  # (4, n, T)
     rotation = (heading_in - search.first_direction[k, None]) % 4
-    step = search.step[np.arange(4)[:, None, None], heading_in]  # (4, n, 4, 2, 2)
-    step[:, :, _SHARED, 0], step[:, :, _SHARED, 1] = 0.0, search.corner_var
-    shift = np.zeros((4, n + 1, 4, 2))
+    step = search.step[np.arange(4)[:, None, None], heading_in]  # (4, n, T, 2, 2)
+    shared = _STEP_CORNERS > 0
+    step[:, :, shared, 0], step[:, :, shared, 1] = 0.0, search.corner_var
+    shift = np.zeros((4, n + 1, steps, 2))
     shift[:, :n] = search.chain_ends[k[:, None], rotation] + step[..., 0, :]
-    shift[:, :n, _SHARED] -= search.first_len[:, None] * UNIT[heading_in[:, :, _SHARED]]
-    var = np.zeros((4, n + 1, 4, 2))
+    shift[:, :n] -= search.corner_at[k[:, None], rotation, _STEP_CORNERS]
+    var = np.zeros((4, n + 1, steps, 2))
     var[:, :n] = step[..., 1, :]
-    heading = np.repeat(np.arange(4)[:, None, None], n + 1, axis=1).repeat(4, axis=2)
+    heading = np.repeat(np.arange(4)[:, None, None], n + 1, axis=1).repeat(steps, axis=2)
     heading[:, :n] = (search.last_direction[k, None] + rotation) % 4
-    gain = np.zeros((n + 1, 4), dtype=np.intp)
+    gain = np.zeros((n + 1, steps), dtype=np.intp)
     gain[:n] = turns + search.turning[:, None]
-    cost = np.full((n + 1, 4), np.inf)
-    cost[:n] = w_turn * (turns != 0)
-    cost[:n, _SHARED] = np.where(search.shareable.any(axis=0), w_turn, np.inf)
+    cost = np.full((n + 1, steps), np.inf)
+    cost[:n] = w_turn * np.abs(turns)
+    entered = np.asarray(search.sharing.any(axis=0))[:, _STEP_CORNERS]  # (n, T): into k so
+    cost[:n] = np.where(shared & ~entered, np.inf, cost[:n])
     cost[n, 0] = 0.0
     junction = np.zeros((n + 1, n + 1))
     junction[:n, :n] = search.junction
@@ -1263,49 +1323,51 @@ def _finishing_cost(
     facts: (C, 3) heading, turns so far and last piece; values: (C, 6) end, mean and
     variance of the hidden displacement (per axis); left: (C, n) the pieces still to place.
     """
-    table, n = search.finishing, len(search.pieces)
+    table, n, steps = search.finishing, len(search.pieces), len(_STEP_CORNERS)
     padded = np.sort(np.where(left, np.arange(n), n), axis=1)[:, :2]  # n >= 2 (a child exists)
     orders = padded[:, [[0, 1], [1, 0]]]  # (C, 2 orders, 2 steps)
     k1, k2 = orders[:, :, 0, None, None], orders[:, :, 1, None, None]  # (C, 2, 1, 1)
-    t1, t2 = np.arange(4)[:, None], np.arange(4)  # (4, 1) and (4,)
+    t1, t2 = np.arange(steps)[:, None], np.arange(steps)  # (T, 1) and (T,)
     h0 = facts[:, 0, None, None, None]
-    h1 = table.heading[h0, k1, t1]  # (C, 2, 4, 1)
-    h2 = table.heading[h1, k2, t2]  # (C, 2, 4, 4)
+    h1 = table.heading[h0, k1, t1]  # (C, 2, T, 1)
+    h2 = table.heading[h1, k2, t2]  # (C, 2, T, T)
     last0 = facts[:, 2, None, None, None]
     last1 = np.where(k1 == n, last0, k1)
     last2 = np.where(k2 == n, last1, k2)
-    gain = table.gain[k1, t1] + table.gain[k2, t2] + table.close_gain[h2]
-    cost = table.cost[k1, t1] + table.cost[k2, t2] + table.close_cost[h2]
+    gain = table.gain[k1, t1] + table.gain[k2, t2] + facts[:, 1, None, None, None]
+    cost = table.cost[k1, t1] + table.cost[k2, t2]
     cost = cost + table.junction[last0, k1] + table.junction[last1, k2]
     cost = cost + search.junction[last2, 0]
     start = values[:, None, None, None, 0:2] + values[:, None, None, None, 2:4]
-    residual = start + table.shift[h0, k1, t1] + table.shift[h1, k2, t2] + table.close_shift[h2]
+    residual = start + table.shift[h0, k1, t1] + table.shift[h1, k2, t2]
     var = values[:, None, None, None, 4:6] + table.var[h0, k1, t1] + table.var[h1, k2, t2]
-    if search.shareable.any():
-        # A shared corner's step also goes back along the last piece's last wall, and only
-        # follows a piece it may share a corner with.
-        share = np.zeros((n + 1, n + 1), dtype=bool)
-        share[:n, :n] = search.shareable
-        back = np.append(search.last_len, 0.0)
-        residual = residual - np.where(
-            (t1 == _SHARED)[..., None], back[last0][..., None] * UNIT[h0], 0.0
-        )
-        residual = residual - np.where(
-            (t2 == _SHARED)[..., None], back[last1][..., None] * UNIT[h1], 0.0
-        )
-        cost = cost + np.where((t1 == _SHARED) & ~share[last0, k1], np.inf, 0.0)
-        cost = cost + np.where((t2 == _SHARED) & ~share[last1, k2], np.inf, 0.0)
-    closure = _closure_nll(residual, var + table.close_var[h2])
-    if search.shareable[:, 0].any():
-        # The loop may close at a shared corner of the first piece instead.
-        first = search.pieces[0]
-        shared_close = share[last2, 0] & (table.close_gain[h2] == -first.first_turn)
-        back_close = back[last2][..., None] * UNIT[h2] + first.keypoints[1]
-        residual = residual - table.close_shift[h2] - back_close
-        shared_nll = _closure_nll(residual, var + search.corner_var)
-        closure = np.where(shared_close, np.minimum(closure, shared_nll), closure)
-    total = cost + search.weights[_F["closure"]] * closure
-    total[facts[:, 1, None, None, None] + gain != 4] = np.inf
+    share = np.zeros((n + 1, n + 1, MOST_SHARED + 1), dtype=bool)
+    share[:n, :n] = search.sharing
+    back = np.append(search.last_len, 0.0)
+    if search.sharing.any():
+        # A step sharing corners also goes back along the last piece's last wall, and only
+        # follows a piece it may share that many corners with.
+        c1, c2 = _STEP_CORNERS[t1], _STEP_CORNERS[t2]
+        residual = residual - np.where((c1 > 0)[..., None], back[last0][..., None] * UNIT[h0], 0.0)
+        residual = residual - np.where((c2 > 0)[..., None], back[last1][..., None] * UNIT[h1], 0.0)
+        cost = cost + np.where((c1 > 0) & ~share[last0, k1, c1], np.inf, 0.0)
+        cost = cost + np.where((c2 > 0) & ~share[last1, k2, c2], np.inf, 0.0)
+    # Closing into the first piece: a plain junction...
+    closes = gain + table.close_gain[h2] == 4
+    total = cost + table.close_cost[h2]
+    closure = _closure_nll(residual + table.close_shift[h2], var + table.close_var[h2])
+    total = np.where(closes, total + search.weights[_F["closure"]] * closure, np.inf)
+    # ...or one sharing the first piece's first corners.
+    first = search.pieces[0]
+    for corners in np.flatnonzero(search.sharing[:, 0].any(axis=0)).tolist():
+        turn = int(search.shared_turn[0, corners])
+        closes = share[last2, 0, corners] & ((first.directions[0] - h2) % 4 == turn % 4)
+        closes &= gain + turn == 4
+        back_close = back[last2][..., None] * UNIT[h2] + first.keypoints[corners]
+        closure = _closure_nll(residual - back_close, var + search.corner_var)
+        shared_total = cost + search.weights[_F["turns"]] * abs(turn)
+        shared_total = shared_total + search.weights[_F["closure"]] * closure
+        total = np.where(closes, np.minimum(total, shared_total), total)
     least: FloatArray = total.reshape(len(total), -1).min(axis=1)
     return least
 
@@ -1623,7 +1685,7 @@ def _restart(search: _Search, j: int) -> int:
 
 
 def _placed_loop(
-    search: _Search, order: Sequence[int], rotations: Sequence[int], shared: Sequence[bool] = ()
+    search: _Search, order: Sequence[int], rotations: Sequence[int], shared: Sequence[int] = ()
 ) -> _State | None:
     """The state of the pieces ``order`` (indices, the first piece first) at quarter turns
     ``rotations`` laid end to end (``shared``: see :attr:`PlacementCandidate.shared`; the
@@ -1639,14 +1701,14 @@ def _laid_after(
     state: _State,
     order: Sequence[int],
     rotations: Sequence[int],
-    shared: Sequence[bool] = (),
+    shared: Sequence[int] = (),
 ) -> list[_State] | None:
     """The states of the pieces ``order`` (indices) at quarter turns ``rotations`` laid end
-    to end after ``state`` (``shared``: per piece, whether it joins at a shared corner;
-    empty: none does), one per piece (each a search node), or None where a junction folds
-    back or cannot share its corner, or walls cross."""
+    to end after ``state`` (``shared``: per piece, how many corners it shares with the one
+    before; empty: none), one per piece (each a search node), or None where a junction
+    folds back or cannot share its corners, or walls cross."""
     laid = []
-    shared = shared or (False,) * len(order)
+    shared = shared or (0,) * len(order)
     for j, rotation, at_corner in zip(order, rotations, shared, strict=True):
         extended = _extend_to(search, state, j, rotation, at_corner)
         if extended is None:
@@ -1668,7 +1730,7 @@ def _polish(search: _Search, start: PlacementCandidate) -> list[PlacementCandida
     index = search.index
     order = np.array([index[fid] for fid in start.order], dtype=np.intp)
     rotations = np.array(start.rotations, dtype=np.intp)
-    shared = list(start.shared) or [False] * len(order)
+    shared = list(start.shared) or [0] * len(order)
     budget = search.nodes + search.params.polish_nodes
     best, better = start, []
     while search.nodes < budget:
@@ -1679,7 +1741,9 @@ def _polish(search: _Search, start: PlacementCandidate) -> list[PlacementCandida
         assert laid is not None  # a loop found before: its walls do not cross
         placed = zip(order[:-1].tolist(), rotations[:-1].tolist(), strict=True)
         kept = {
-            (*key, int(order[k]), int(rotations[k])) for k, key in enumerate(placed, 1) if shared[k]
+            (*key, int(order[k]), int(rotations[k])): shared[k]
+            for k, key in enumerate(placed, 1)
+            if shared[k]
         }
         prefix = [root, *laid]  # the current loop's states, one per piece placed
         moved = None
@@ -1691,7 +1755,7 @@ def _polish(search: _Search, start: PlacementCandidate) -> list[PlacementCandida
                 orders[c, first - 1 : -1].tolist(), turned[c, first - 1 : -1].tolist(), strict=True
             )
             flags = [
-                (*pair, int(orders[c, k]), int(turned[c, k])) in kept
+                kept.get((*pair, int(orders[c, k]), int(turned[c, k])), 0)
                 for k, pair in enumerate(pairs, first)
             ]
             laid = _laid_after(
@@ -1712,20 +1776,25 @@ def _polish(search: _Search, start: PlacementCandidate) -> list[PlacementCandida
             break
         better.append(best)
         order, rotations = orders[moved], turned[moved]
-        shared = list(best.shared) or [False] * len(order)
+        shared = list(best.shared) or [0] * len(order)
     return better
 
 
 def _extend_to(
-    search: _Search, state: _State, j: int, rotation: int, shared: bool = False
+    search: _Search, state: _State, j: int, rotation: int, shared: int = 0
 ) -> _State | None:
-    """:func:`_extend` with piece j at a given quarter turn (counted as a search node), or
-    None where its junction would fold back, or cannot be the shared corner asked for."""
+    """:func:`_extend` with piece j at a given quarter turn (counted as a search node),
+    sharing ``shared`` corners with the last piece; None where its junction would fold
+    back, or cannot share those corners."""
     search.nodes += 1
-    turn = int(_TURN_OF[(rotation + search.pieces[j].directions[0] - state.heading) % 4])
-    if shared and not (search.shareable[state.order[-1], j] and turn == -search.first_sign[j]):
-        return None
-    return None if turn == 2 else _extend(search, state, j, turn, shared=shared)
+    heading_change = (rotation + search.pieces[j].directions[0] - state.heading) % 4
+    if shared:
+        turn = int(search.shared_turn[j, shared])
+        if not search.sharing[state.order[-1], j, shared] or heading_change != turn % 4:
+            return None
+        return _extend(search, state, j, turn, shared=shared)
+    turn = int(_TURN_OF[heading_change])
+    return None if turn == 2 else _extend(search, state, j, turn)
 
 
 def _moves(
@@ -1838,7 +1907,7 @@ def _outside(
     order: Sequence[int],
     rotations: Sequence[int],
     sources: Sequence[FloatArray],
-    shared: Sequence[bool] = (),
+    shared: Sequence[int] = (),
 ) -> float:
     """The ``outside`` feature of a closed loop: the pieces (indices, quarter turns, sources
     in loop order; ``shared``: see :attr:`PlacementCandidate.shared`) with the floor they
@@ -1847,11 +1916,11 @@ def _outside(
     corner off."""
     cells, loop = [], []
     n = len(order)
-    shared = shared or (False,) * n
+    shared = shared or (0,) * n
     for k, (j, rotation, source) in enumerate(zip(order, rotations, sources, strict=True)):
         piece = search.pieces[j]
         cells.append(piece.rotated_free_centres[rotation] + source)
-        first = 1 if shared[k] else 0
+        first = shared[k]  # the points before its last shared corner lie on the last piece
         last = len(piece.keypoints) - (1 if shared[(k + 1) % n] else 0)
         loop.append(piece.rotated[rotation][0][first:last] + source)
     params = search.params
@@ -1867,11 +1936,11 @@ def translations_of(pieces: Sequence[Piece], cand: PlacementCandidate) -> FloatA
     by_id: Mapping[str, Piece] = {p.id: p for p in pieces}
     end = np.zeros(2)
     out = []
-    shared = cand.shared or (False,) * len(cand.order)
+    shared = cand.shared or (0,) * len(cand.order)
     for k, (fid, rotation) in enumerate(zip(cand.order, cand.rotations, strict=True)):
         if k and shared[k]:
             prev, prev_rotation = by_id[cand.order[k - 1]], cand.rotations[k - 1]
-            end = end + corner_shift(prev, prev_rotation, by_id[fid], rotation)
+            end = end + corner_shift(prev, prev_rotation, by_id[fid], rotation, shared[k])
         out.append(end.copy())
         end = end + by_id[fid].keypoints[-1] @ rot90(rotation).T
     return np.asarray(out).reshape(-1, 2)
@@ -1884,16 +1953,16 @@ def evaluate_placement(
     params: PlacementParams = PlacementParams(),
     hints: SiteHints | None = None,
     frame_yaw: float | None = None,
-    shared: Sequence[bool] | None = None,
+    shared: Sequence[int] | None = None,
 ) -> PlacementCandidate | None:
     """Energy of one given closed placement, or None when it is not a valid closed loop.
 
     The same energy the search minimises; used to check the search against brute force,
     to score the truth in benchmarks and a placement a user proposes. frame_yaw: the hints
     frame's yaw to score prior poses in (:attr:`Placement.frame_yaw`); None: the priors'
-    own estimate. shared: which junctions join at a shared corner (see
+    own estimate. shared: how many corners each junction shares (see
     :attr:`PlacementCandidate.shared`); None: the placement of least energy over every
-    choice the pieces allow (at most ``_EVALUATED_SHARES`` junctions are tried both ways).
+    choice the pieces allow (at most ``_EVALUATED_SHARES`` junctions are tried every way).
     """
     by_id = {p.id: i for i, p in enumerate(pieces)}
     if order[0] != pieces[0].id or rotations[0] != 0 or sorted(order) != sorted(by_id):
@@ -1901,15 +1970,16 @@ def evaluate_placement(
     search = _Search(list(pieces), params, hints or SiteHints(), True, None, frame_yaw)
     led = [by_id[fid] for fid in order]
     if shared is not None:
-        choices: list[Sequence[bool]] = [shared]
+        choices: list[Sequence[int]] = [shared]
     else:
-        may = [k for k in range(1, len(led)) if search.shareable[led[k - 1], led[k]]]
+        may = [k for k in range(1, len(led)) if search.sharing[led[k - 1], led[k]].any()]
         may = may[:_EVALUATED_SHARES]
+        ways = [[0, *np.flatnonzero(search.sharing[led[k - 1], led[k]]).tolist()] for k in may]
         choices = []
-        for picked in itertools.product((False, True), repeat=len(may)):
-            chosen = [False] * len(led)
-            for k, flag in zip(may, picked, strict=True):
-                chosen[k] = flag
+        for picked in itertools.product(*ways):
+            chosen = [0] * len(led)
+            for k, corners in zip(may, picked, strict=True):
+                chosen[k] = corners
             choices.append(chosen)
     best = None
     for flags in choices:
