@@ -8,9 +8,12 @@ import itertools
 import numpy as np
 import pytest
 
+from services.geometry import signed_area
+from services.layout_model import build_polygon
 from services.placement import SiteHints, evaluate_placement, place_pieces, translations_of
 from services.placement import search as search_module
 from services.placement.corners import corner_offsets, corner_view, entered_at_corner, sharings
+from services.refinement import refine_translations
 from tests.conftest import UNTUNED, chains_from_polygon, point_at_arc
 
 pytestmark = pytest.mark.timeout(120)
@@ -167,3 +170,19 @@ def test_the_search_finds_the_least_energy_with_shared_corners(l_room, seed):
             if cand is not None:
                 least = min(least, cand.energy)
     assert placement.best.energy == pytest.approx(least)
+
+
+def test_a_loop_sharing_two_corners_refines_to_its_room():
+    pieces = _frames(TWO_STARTS, TWO_ENDS)
+    placement = place_pieces(pieces, GEOMETRY)
+    assert placement is not None
+    best = placement.best
+    ordered = [{p.id: p for p in pieces}[fid] for fid in best.order]
+    refined = refine_translations(
+        ordered, best.rotations, placement.translations, GEOMETRY, {}, shared=best.shared
+    )
+    assert refined.status == "solved"
+    assert np.allclose(refined.translations, placement.translations, atol=0.02)
+    polygon = build_polygon(ordered, best.rotations, refined.translations, best.shared)
+    assert len(polygon) == 4
+    assert abs(signed_area(polygon)) == pytest.approx(24.0, rel=0.01)
