@@ -13,8 +13,9 @@ corners: the next piece's first two on the last piece's last two, the wall betwe
 long in both.
 
 Downstream (refinement, floorplan, confidence) a shared junction is a straight one: the
-piece entered at the corner loses its first wall (:func:`corner_view`) and the overlap along
-the wall after the corner is a measurement, as if the two ends' structure had measured it.
+piece entered at its last shared corner loses the walls before it (:func:`corner_view`) and
+the overlap along the wall after that corner is a measurement, as if the two ends'
+structure had measured it.
 """
 
 from __future__ import annotations
