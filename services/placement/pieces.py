@@ -208,8 +208,7 @@ class Piece:
     @cached_property
     def turning(self) -> int:
         """Signed quarter turns inside the chain (left +1, right -1)."""
-        steps = np.diff(np.asarray(self.directions)) % 4
-        return int(np.sum(steps == 1) - np.sum(steps == 3))
+        return sum(self.turns)
 
     @cached_property
     def corners(self) -> int:
@@ -229,9 +228,10 @@ class Piece:
 
     @cached_property
     def turns(self) -> tuple[int, ...]:
-        """Each corner of the chain in order: +1 turning left, -1 right."""
+        """Each corner of the chain in order: +1 turning left, -1 right (0 where two walls
+        run the same way or back, which no chain has)."""
         steps = np.diff(np.asarray(self.directions)) % 4
-        return tuple(int(t) for t in np.where(steps == 1, 1, -1))
+        return tuple(int(t) for t in np.select([steps == 1, steps == 3], [1, -1], 0))
 
     @cached_property
     def rotated(self) -> tuple[tuple[FloatArray, FloatArray, FloatArray], ...]:

@@ -542,15 +542,13 @@ def _padded(rows: Sequence[FloatArray]) -> FloatArray:
 
 
 class _Placed(NamedTuple):
-    """A batch of states' placed walls, (K, P, 4) padded with NaN rows, and ends (K, 2)."""
+    """A batch of states' placed walls, (K, P, 4) padded with NaN rows."""
 
     walls: FloatArray
-    ends: FloatArray
 
     @classmethod
     def of(cls, states: Sequence[_State]) -> _Placed:
-        ends = np.array([s.end for s in states]).reshape(-1, 2)
-        return cls(_padded([s.walls for s in states]), ends)
+        return cls(_padded([s.walls for s in states]))
 
 
 def _children_walls(
@@ -1201,7 +1199,8 @@ def _with_shared(
     if len(parent) == sum(len(p) for p in parents):
         return parent, piece, turn, corners[0]
     by_parent = np.argsort(np.concatenate(parents), kind="stable")
-    return tuple(np.concatenate(a)[by_parent] for a in (parents, pieces, turns, corners))  # type: ignore[return-value]
+    merged = [np.concatenate(a)[by_parent] for a in (parents, pieces, turns, corners)]
+    return merged[0], merged[1], merged[2], merged[3]
 
 
 def _tour(search: _Search) -> FloatArray:
