@@ -433,14 +433,32 @@ def _frustum_path(
     spread = np.abs(bearing[:, None] - bearing[None, :])
     # Widest angle first; among (nearly) equal angles the cheaper path.
     score = np.where(np.isfinite(reach) & (reach > 0), spread - 1e-3 * reach, -np.inf)
-    a, b = np.unravel_index(int(np.argmax(score)), score.shape)
-    if not np.isfinite(score[a, b]):
-        return None
-    source, target = int(inside[a]), int(inside[b])
-    path = [target]
-    while path[-1] != source:
-        path.append(int(pred[a, path[-1]]))
-    return path[::-1], float(reach[a, b])
+    ranked = np.argsort(-score, axis=None, kind="stable")
+    for flat in ranked[np.isfinite(score.ravel()[ranked])]:
+        a, b = np.unravel_index(int(flat), score.shape)
+        source, target = int(inside[a]), int(inside[b])
+        path = [target]
+        while path[-1] != source:
+            path.append(int(pred[a, path[-1]]))
+        path.reverse()
+        if _faces(points[path], centre):
+            return path, float(reach[a, b])
+    return None
+
+
+def _faces(chain: FloatArray, centre: FloatArray) -> bool:
+    """Whether a chain (K, 2), interior on the left, shows ``centre`` the inner face of at
+    least one wall: a camera in the room sees no wall from behind (a wall facing away can
+    be one hidden behind a step, never the only kind a chain holds).
+
+    >>> wall = np.array([[-1.0, 2.0], [1.0, 2.0]])
+    >>> _faces(wall, np.zeros(2)), _faces(wall[::-1], np.zeros(2))
+    (False, True)
+    """
+    along = np.diff(chain, axis=0)
+    to_centre = centre - chain[:-1]
+    left = along[:, 0] * to_centre[:, 1] - along[:, 1] * to_centre[:, 0]
+    return bool(np.any(left > 0.0))
 
 
 def find_wall_chain(

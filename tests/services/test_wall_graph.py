@@ -14,6 +14,7 @@ from services.wall_graph import (
     _build_nodes,
     _corners_only,
     _edges,
+    _frustum_path,
     find_wall_chain,
 )
 from services.wall_lines import WallLine
@@ -343,3 +344,23 @@ def test_a_chain_seen_nearly_all_around_keeps_the_wall_it_starts_along() -> None
     assert np.allclose(chain.keypoints[1], [6.69, 3.31], atol=0.1)
     assert np.allclose(chain.keypoints[-1], [9.54, 5.51], atol=0.1)
     assert len(chain.keypoints) == 8
+
+
+def test_a_frame_chain_shows_the_camera_a_wall_from_inside() -> None:
+    """A camera at the origin looking along +y. The widest pair of keypoints in view joins
+    a wall 1.5 m ahead whose inner side faces away from the camera (deduced behind a
+    shelf, say); the far wall faces it. No camera in the room sees a wall only from
+    behind: the chain is the far wall."""
+    from scipy.sparse import csr_matrix
+
+    from services.frustum import CameraView
+    from services.rgbd import OPTICAL_TO_LEVEL
+    from services.synthetic.render import KINECT
+
+    points = np.array([[-1.0, 1.5], [1.0, 1.5], [1.0, 4.8], [-1.6, 4.8]])
+    # Directed edges keep the interior on the left: 0 -> 1 has it beyond, 2 -> 3 before.
+    weights = csr_matrix((np.ones(2), ([0, 2], [1, 3])), shape=(4, 4))
+    view = CameraView.from_intrinsics(KINECT, OPTICAL_TO_LEVEL, np.zeros(3))
+    found = _frustum_path(weights, points, [view])
+    assert found is not None
+    assert found[0] == [2, 3]
