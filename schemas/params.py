@@ -241,6 +241,16 @@ class PlacementParams(_Frozen):
         "be kept: a prior against the trim, since most short convex end walls are the "
         "room's own corners (about one in four a furniture side)",
     )
+    end_step_depth: float = Field(
+        0.8,
+        ge=0,
+        description="RGB-D frames: a chain that ends by turning off a wall onto a front and "
+        "back onto a side no longer than this (furniture standing in the corner at the "
+        "view's edge) is also tried with the front moved back onto the wall the side meets, "
+        "given to the same views and kept as the end-wall trial keeps its variants "
+        "(end_wall_least_view, end_wall_prior; services.end_walls; a kinect's held-out "
+        "1000-1039 lost a room by it, outside seed 24 won one); 0 turns it off, m",
+    )
     station_view_overlap: float = Field(
         8.0,
         ge=0,

@@ -9,6 +9,8 @@ CLI), merging overlapping ones first, and returns the layouts with the result.
 from __future__ import annotations
 
 import dataclasses
+import functools
+import itertools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -34,7 +36,7 @@ from services.confidence import (
     rank_assemblies,
     same_room,
 )
-from services.end_walls import END_WALLS, without_end_wall
+from services.end_walls import END_WALLS, flattened_end_step, without_end_wall
 from services.fragments import Fragment, fragment_layout, fragment_points
 from services.frame_merge import (
     FrameGroup,
@@ -771,15 +773,20 @@ def _without_furniture_sides(
     report: ProgressFn,
 ) -> tuple[dict[str, LocalLayout], _PlacedSite]:
     """The layouts and the site placed (:func:`_placed_site`), with each frame chain's
-    short convex end wall dropped where the site then closes with an energy lower by
-    ``end_wall_prior`` (:mod:`services.end_walls`), one wall at a time, fragments in id
-    order; a loop that closes beats one that does not."""
+    short convex end wall dropped, or its end step round furniture in a corner flattened,
+    where the site then closes with an energy lower by ``end_wall_prior``
+    (:mod:`services.end_walls`), one end at a time, fragments in id order; a loop that
+    closes beats one that does not."""
     kept = dict(layouts)
     placed = _placed_site(kept, usable, hints, params)
-    longest, least_view = params.placement.end_wall_trial, params.placement.end_wall_least_view
+    least_view = params.placement.end_wall_least_view
+    trims = (
+        functools.partial(without_end_wall, longest=params.placement.end_wall_trial),
+        functools.partial(flattened_end_step, deepest=params.placement.end_step_depth),
+    )
     for k, fid in enumerate(sorted(usable)):
-        for end in END_WALLS:
-            variant = without_end_wall(kept[fid], end, longest, least_view)
+        for end, trim in itertools.product(END_WALLS, trims):
+            variant = trim(kept[fid], end, least_view=least_view)
             if variant is None:
                 continue
             trial = {**kept, fid: variant}

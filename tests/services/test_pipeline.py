@@ -418,29 +418,58 @@ def _framed(layouts: dict[str, LocalLayout]) -> dict[str, LocalLayout]:
     }
 
 
+def _placed_with_trial(
+    layouts: dict[str, LocalLayout], p1: np.ndarray, trial: str
+) -> tuple[ResultModel, ResultModel, ResultModel]:
+    """The site placed as it is, with p1's chain replaced by ``p1``, and so again with the
+    chain-end trial ``trial`` (a placement parameter) switched off."""
+    changed = {**layouts, "p1": dataclasses.replace(layouts["p1"], keypoints=p1)}
+    exact = PlacementParams(refined_junction_mean=0.0)
+    off = PipelineParams(placement=exact.model_copy(update={trial: 0}))
+    return (
+        place_site(layouts, PipelineParams(placement=exact)),
+        place_site(changed, PipelineParams(placement=exact)),
+        place_site(changed, off),
+    )
+
+
 def test_a_frame_chain_ending_on_a_furniture_side_is_placed_without_it():
     # The L room's p1 ends on a 3 m wall; a wardrobe's side (0.6 m, turning into the room)
     # at the view's edge adds a corner the room does not have.
     layouts = _framed(_hand_layouts([1.0, 9.5, 14.0, 20.0]))
     ends = layouts["p1"].keypoints
-    sided = {
-        **layouts,
-        "p1": dataclasses.replace(
-            layouts["p1"], keypoints=np.vstack([ends, ends[-1] + np.array([0.0, -0.6])])
-        ),
-    }
-    exact = PlacementParams(refined_junction_mean=0.0)
-    clean = place_site(layouts, PipelineParams(placement=exact))
-    tried = place_site(sided, PipelineParams(placement=exact))
-    kept = place_site(
-        sided, PipelineParams(placement=exact.model_copy(update={"end_wall_trial": 0}))
-    )
+    sided = np.vstack([ends, ends[-1] + np.array([0.0, -0.6])])
+    clean, tried, kept = _placed_with_trial(layouts, sided, "end_wall_trial")
     p1 = {f.id: f for f in tried.fragments}["p1"]
     assert len(p1.local_layout.keypoints) == len(ends)  # reported as placed: without it
     assert tried.floorplan.rooms[0].polygon == clean.floorplan.rooms[0].polygon
     assert tried.confidence == pytest.approx(clean.confidence)
     room = np.array(kept.floorplan.rooms[0].polygon)
     assert abs(signed_area(room) - signed_area(np.array(clean.floorplan.rooms[0].polygon))) > 1.0
+
+
+def test_a_frame_chain_ending_round_a_wardrobe_in_a_corner_is_placed_flattened():
+    # An 8 x 5 m room. p1 runs up x = 8 to the convex corner (8, 5), then 1.9 m along the
+    # top wall, where its view ends. A wardrobe 0.6 m deep stands in that corner along
+    # those 1.9 m: the chain turns early onto its front, then back onto its side down to
+    # the wall, a notch the room does not have.
+    rect = np.array([[0.0, 0.0], [8.0, 0.0], [8.0, 5.0], [0.0, 5.0]])
+    pieces = chains_from_polygon(rect, [1.0, 7.0, 14.9, 20.0], [0, 1, 2, 3])
+    layouts = _framed(
+        {
+            p.id: LocalLayout(keypoints=p.keypoints, frame=ManhattanFrame(np.eye(3), 0.0, 2.7))
+            for p in pieces
+        }
+    )
+    kp = layouts["p1"].keypoints
+    back = 0.6 * (kp[-2] - kp[-3]) / np.linalg.norm(kp[-2] - kp[-3])
+    stepped = np.vstack([kp[:-2], kp[-2] - back, kp[-1] - back, kp[-1:]])
+    clean, tried, kept = _placed_with_trial(layouts, stepped, "end_step_depth")
+    p1 = {f.id: f for f in tried.fragments}["p1"]
+    assert len(p1.local_layout.keypoints) == len(kp)  # reported as placed: flattened
+    assert np.allclose(tried.floorplan.rooms[0].polygon, clean.floorplan.rooms[0].polygon)
+    assert len(clean.floorplan.rooms[0].polygon) == 4
+    assert len(kept.floorplan.rooms[0].polygon) == 6  # without the trial: the notch
 
 
 def test_a_real_short_corner_wall_at_a_frame_chain_end_is_kept():
