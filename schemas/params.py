@@ -217,6 +217,17 @@ class PlacementParams(_Frozen):
         description="RGB-D frames: the scale of the stations term: a camera this far from "
         "the nearest other piece's costs 0.5, m",
     )
+    station_occam: float = Field(
+        2.0,
+        ge=0,
+        description="RGB-D frames: what the stations term adds per station beyond the "
+        "first that the refined cameras stand at (cameras within station_reach are one): "
+        "each station is one more position to place anywhere in the room, about "
+        "log(room area / the area a station's cameras spread over) = 2-4 nats more than "
+        "one its cameras share (outside frames seeds 22-25: 2 and 4 did alike), so of two "
+        "assemblies whose cameras each have a partner nearby, the one whose cameras stand "
+        "at fewer stations is likelier; 0 turns it off",
+    )
     end_wall_trial: float = Field(
         1.3,
         ge=0,

@@ -7,9 +7,13 @@ frame a quarter or swaps two of them, the cameras scatter. Each kept assembly of
 RGB-D frames is refined and gets an energy term of its own, the ``stations`` feature: per
 camera, the squared distance to the nearest camera of another piece (at most the station
 reach: cameras farther apart are other stations, and cost no more) over twice
-``station_spread`` squared, weighted by ``station_weight``. The search does not see it (it
-is known only once a loop is refined), so it ranks the assemblies the search kept, as the
-floor seen outside them does. Clouds have no cameras: their placement is returned as it is.
+``station_spread`` squared, plus ``station_occam`` per station beyond the first, weighted by
+``station_weight``. The second part is an Occam factor: a rival that turns a frame or two
+by a half turn can still give each camera a partner nearby, pairing them off at two
+stations where the truth has one, and each station more is one more position the room
+could have put anywhere. The search does not see the term (it is known only once a loop
+is refined), so it ranks the assemblies the search kept, as the floor seen outside them
+does. Clouds have no cameras: their placement is returned as it is.
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ __all__ = [
     "refined_cameras",
     "station_cost",
     "station_count",
+    "station_term",
     "with_station_cost",
     "with_station_scored",
 ]
@@ -106,10 +111,25 @@ def with_station_scored(
     """
     if cand.missing:
         return cand
-    cameras = refined_cameras(cand, pieces, measured, params, hints)
-    cost = station_cost(cameras, params.station_reach, params.station_spread)
+    cost = station_term(refined_cameras(cand, pieces, measured, params, hints), params)
     features = {**cand.features, "stations": cost}
     return replace(cand, energy=cand.energy + params.station_weight * cost, features=features)
+
+
+def station_term(cameras: Sequence[FloatArray], params: PlacementParams) -> float:
+    """The ``stations`` feature of placed cameras (per piece, (C, 2), site frame): each
+    camera's :func:`station_cost` and ``station_occam`` per station beyond the first
+    (:func:`station_count`).
+
+    >>> one_station = [np.zeros((1, 2)), np.zeros((1, 2))]
+    >>> station_term(one_station, PlacementParams(station_occam=2.0))
+    0.0
+    >>> station_term(one_station + [np.full((1, 2), 3.0)] * 2, PlacementParams(station_occam=2.0))
+    2.0
+    """
+    cost = station_cost(cameras, params.station_reach, params.station_spread)
+    stations = station_count(cameras, params.station_reach)
+    return cost + params.station_occam * max(0, stations - 1)
 
 
 def refined_cameras(

@@ -58,10 +58,30 @@ def test_the_assembly_whose_cameras_stand_together_wins_a_tie() -> None:
     ranked = with_station_cost(placement, pieces, PlacementParams())
     assert ranked.best.order == ("p0", "p1", "p2", "p3")
     assert ranked.best.rotations == (0, 3, 2, 1)  # each frame turned back into the room's
-    assert ranked.best.features["stations"] == pytest.approx(0.0, abs=1e-3)
-    assert all(c.features["stations"] > 1.0 for c in ranked.alternatives if not c.missing)
+    two = PlacementParams().station_occam  # two stations: one beyond the first
+    assert ranked.best.features["stations"] == pytest.approx(two, abs=1e-3)
+    assert all(c.features["stations"] > two + 1.0 for c in ranked.alternatives if not c.missing)
     assert ranked.alternatives[0].energy > ranked.best.energy + 1.0
     np.testing.assert_allclose(ranked.translations, SOURCES, atol=1e-6)
+
+
+def test_of_assemblies_whose_cameras_all_have_partners_fewer_stations_win() -> None:
+    # Every frame taken from one camera off the room's centre. Swapping the frames of the
+    # two short walls (each turned half round onto the other's wall) moves both their
+    # cameras to the same mirrored point: every camera still has a partner, now at two
+    # stations. Only the count of stations tells that rival from the truth.
+    pieces = _frames(np.repeat([[4.5, 1.0]], 4, axis=0))
+    placement = place_pieces(pieces)
+    assert placement is not None
+    truth, swapped = ("p0", "p1", "p2", "p3"), ("p0", "p3", "p2", "p1")
+    counted = with_station_cost(placement, pieces, PlacementParams())
+    assert counted.best.order == truth
+    rival = next(c for c in counted.alternatives if c.order == swapped)
+    assert rival.features["stations"] == pytest.approx(PlacementParams().station_occam, abs=0.05)
+    assert rival.energy > counted.best.energy + 1.0
+    blind = with_station_cost(placement, pieces, PlacementParams(station_occam=0.0))
+    energy = {c.order: c.energy for c in (blind.best, *blind.alternatives)}
+    assert energy[swapped] == pytest.approx(energy[truth], abs=0.05)  # without it: a tie
 
 
 def test_clouds_and_a_weight_of_nothing_leave_the_placement_as_it_is() -> None:
@@ -101,8 +121,10 @@ def test_prior_poses_anchor_the_refinement_a_station_term_is_measured_on() -> No
         for p, source in zip(pieces, SOURCES, strict=True)
     }
     hints = SiteHints(priors=priors)
-    anchored = with_station_scored(truth, pieces, None, PlacementParams(), hints)
-    loose = with_station_scored(truth, pieces, None, PlacementParams())
+    # The term's distances alone (one station more or less would add a constant).
+    distances = PlacementParams(station_occam=0.0)
+    anchored = with_station_scored(truth, pieces, None, distances, hints)
+    loose = with_station_scored(truth, pieces, None, distances)
     start = translations_of(pieces, truth)
     refined = refine_translations(
         pieces, truth.rotations, start, PlacementParams(), None, prior_anchors(hints, truth, start)
