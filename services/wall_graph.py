@@ -417,6 +417,8 @@ def _frustum_path(
     """The paper's rule for RGB-D frames: source and target are the two candidate keypoints
     inside the cameras' view with the widest angle seen from the camera (the mean of the
     centres), joined by a path; the min-cost path between them. Ties go to the cheaper path.
+    A pair whose path shows the camera no wall's inner face (:func:`_faces`) is passed over
+    for the next widest.
     """
     if len(points) < 2:
         return None
