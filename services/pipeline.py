@@ -61,6 +61,7 @@ from services.placement import (
     place_pieces,
     rot90,
 )
+from services.placement.corners import corner_offsets
 from services.placement.priors import (
     chain_placement,
     fit_frame,
@@ -272,10 +273,11 @@ def _gap(ordered: Sequence[Piece], cand: PlacementCandidate, translations: Float
     at a shared corner)."""
     last = ordered[-1].keypoints
     end = translations[-1] + rot90(cand.rotations[-1]) @ last[-1]
+    start = translations[0]
     if cand.shared and cand.shared[0]:
         end = end - rot90(cand.rotations[-1]) @ (last[-1] - last[-2])
-        end = end - rot90(cand.rotations[0]) @ ordered[0].keypoints[cand.shared[0]]
-    return float(np.abs(end - translations[0]).sum())
+        start = start + corner_offsets(ordered, cand.rotations, cand.shared)[0]
+    return float(np.abs(end - start).sum())
 
 
 def _gap_limit(ordered: Sequence[Piece], cand: PlacementCandidate, params: PipelineParams) -> float:
