@@ -409,20 +409,21 @@ class PlacementParams(_Frozen):
         "conflict, its hidden corners, search truncated); (0, 1, 0, ...) is the share itself",
     )
     frame_calibration: tuple[float, float] = Field(
-        (-0.675, 0.379),
+        (-0.159, 0.398),
         description="(bias, slope) mapping the main room's calibrated logit z to a + b z when "
         "its pieces are RGB-D frames (a share of the pieces: that share of the change): a "
         "frame's chain is wrong more often than a cloud's (bench/rgbd_frames.py --fit, tune "
-        "seeds); (0, 1) leaves frames as clouds",
+        "seeds; then refitted with the slopes below on outside frame draws, seeds 22-25, "
+        "checked on 26-27: bench/outside/fit_frames.py); (0, 1) leaves frames as clouds",
     )
     frame_view_slope: float = Field(
-        -0.061,
+        -0.064,
         description="change of that logit per radian the frames see across beyond the "
         "kinect's 63 degrees (a wider camera's chains are right more often, but its rooms "
         "reach higher logits still; bench/rgbd_frames.py --fit over several cameras)",
     )
     frame_view_top_slope: float = Field(
-        -10.9,
+        -11.456,
         le=0,
         description="change of that logit per radian the top of the frames' views lies "
         "below 4 degrees above level, the lowest the calibration was fitted on (a camera "
@@ -430,7 +431,7 @@ class PlacementParams(_Frozen):
         "--fit-view-top)",
     )
     frame_station_slope: float = Field(
-        -1.282,
+        -1.347,
         le=0,
         description="change of that logit per station beyond two that the main room's "
         "refined cameras stand at (cameras of several pieces within station_reach are one "
