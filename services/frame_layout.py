@@ -43,6 +43,7 @@ from services.wall_graph import find_wall_chain
 from services.wall_lines import (
     MAX_DOORWAY,
     MAX_FURNITURE_DEPTH,
+    MAX_OPEN_ABOVE,
     MAX_WALL_THICKNESS,
     WallLine,
     find_wall_lines,
@@ -543,7 +544,8 @@ def _to_frustum_edges(
     frame's chain starts at that edge). The move stops where a seen wall of the other axis
     meets the line on the way (the wall turns there; a door's reveal does not count), and is
     refused where the line would run through more than 2 m of space seen on both sides (the room
-    opens up there), the WE-graph's limit for an edge (services.wall_graph). Nothing
+    opens up there), the WE-graph's limit for an edge (services.wall_graph), or through any
+    stretch its camera saw through higher than a door's top (no lintel: no door either). Nothing
     scanned on the room's side is no reason to stop: a wardrobe hides that strip as well
     (refusing those moves cost 9 points of ACC_local on the frames benchmark). But with one
     camera (its view ``ranges``, :func:`services.view_ranges.view_ranges`) the move stops
@@ -574,7 +576,8 @@ def _to_frustum_edges(
             along = max((turn - start) * float(np.sign(outward[line.axis])), 0.0)
             moved = keypoints[end] + along * outward
             stop = float(moved[line.axis])
-        if line.crossing_gap(start, stop) <= MAX_DOORWAY:
+        seen_open = line.open_above_gap(start, stop) > MAX_OPEN_ABOVE
+        if line.crossing_gap(start, stop) <= MAX_DOORWAY and not seen_open:
             out[end] = moved
     return out
 

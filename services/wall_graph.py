@@ -20,7 +20,7 @@ from scipy.sparse.csgraph import dijkstra, minimum_spanning_tree
 from schemas.params import LayoutParams
 from services.frustum import CameraView, in_any_view
 from services.types import FloatArray
-from services.wall_lines import MAX_DOORWAY, WallLine, run_axis
+from services.wall_lines import MAX_DOORWAY, MAX_OPEN_ABOVE, WallLine, run_axis
 
 __all__ = ["WallChain", "find_wall_chain"]
 
@@ -144,6 +144,7 @@ def _edges(
                     or length <= 0
                     or line.open_gap(ru, rv) > _MAX_OPEN_GAP
                     or line.crossing_gap(ru, rv) > MAX_DOORWAY
+                    or line.open_above_gap(ru, rv) > MAX_OPEN_ABOVE
                 ):
                     continue
                 # Cells are counted whole, so H may exceed the fractional L by a rounding.
@@ -255,8 +256,10 @@ def _most_wall_path(
     evidenced line than follow them; this score follows them. A door costs nothing and a
     cabinet in front of a wall only half its length, so a chain is not cut short before the last
     stretch of wall; edges never run far through space seen on both sides of their line
-    (see :meth:`WallLine.crossing_gap`). The paper instead takes the two ends of the
-    longest path in a spanning forest of the keypoints (``source_target="spanning_forest"``).
+    (see :meth:`WallLine.crossing_gap`), nor where a frame's camera saw through the line
+    higher than a door's top (:meth:`WallLine.open_above_gap`: no lintel, so no door). The
+    paper instead takes the two ends of the longest path in a spanning forest of the
+    keypoints (``source_target="spanning_forest"``).
 
     The search is label-correcting over states, one best simple path per state: a state
     is a node and the axis the path arrived along, numbered ``2 * node + axis`` (axis 0: x,

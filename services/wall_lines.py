@@ -28,6 +28,7 @@ from services.types import FloatArray
 __all__ = [
     "MAX_DOORWAY",
     "MAX_FURNITURE_DEPTH",
+    "MAX_OPEN_ABOVE",
     "MAX_WALL_THICKNESS",
     "WallLine",
     "evidence_threshold",
@@ -77,6 +78,12 @@ _LINTEL_LOW = 1.6  # m over the floor: a column whose wall points all stand high
 _SEEN_THROUGH_REACH = 5.0  # m, farthest behind a wall's opening the next room's wall is taken
 _SEEN_OPENING_CELLS = 3  # cells of opening (and of whole wall) a wall seen through one shows
 _WINDOW_HEIGHT = 0.5  # m, least gap in a column's wall under wall seen over _LINTEL_LOW: a window
+# m over the floor: a camera's ray crossing a line this high saw over where a door's lintel
+# stands (doors of both generators top out at 2.15 m; real ones mostly at 2.0-2.1 m)
+_OVER_DOORS = 2.3
+# m, longest stretch of a line seen through over a door's top that a wall may still span
+# (a few cells: stray ceiling points); past it the room goes on there
+MAX_OPEN_ABOVE = 0.3
 
 
 @dataclass(frozen=True)
@@ -97,6 +104,8 @@ class WallLine:
     occupied: (C,) bool or None: cells holding any wall point of the line, at any height.
     lintel: (C,) bool or None: cells whose wall stands over an opening: all its points over
     ``_LINTEL_LOW`` (above a door, or above tall furniture), or over and under a window.
+    open_above: (C,) bool or None: cells through which one camera saw space beyond the line
+    higher than any door's lintel (``_OVER_DOORS``): no wall stands there, nor a door.
     """
 
     axis: int
@@ -111,6 +120,7 @@ class WallLine:
     seen_through: NDArray[np.bool_] | None = None
     occupied: NDArray[np.bool_] | None = None
     lintel: NDArray[np.bool_] | None = None
+    open_above: NDArray[np.bool_] | None = None
 
     def open_gap(self, start: float, end: float) -> float:
         """Longest stretch (m) between two run coordinates with neither wall evidence nor
@@ -159,6 +169,11 @@ class WallLine:
         limit = int(_MAX_HIDDEN_LEAD / self.cell_size)
         ahead = _cells_ahead(partly, first, outward, limit)
         return int(np.argmin(ahead)) if not ahead.all() else len(ahead)
+
+    def open_above_gap(self, start: float, end: float) -> float:
+        """Longest stretch (m) between two run coordinates that a camera saw through
+        above a door's top: the room goes on there, past where the line would stand."""
+        return self._longest_run(self.open_above, start, end)
 
     def high_run_beyond(self, run: float, outward: int) -> float:
         """How far (m) the line's high evidence goes on from run coordinate ``run`` in
@@ -491,6 +506,35 @@ def _ray_crossings(
     return np.bincount(cells, minlength=n_cells).astype(np.float64)
 
 
+def _seen_over_doors(
+    axis: int,
+    offset: float,
+    flat: FloatArray,
+    camera: FloatArray,
+    over: float,
+    origin: float,
+    cell: float,
+    n_cells: int,
+) -> NDArray[np.bool_]:
+    """(C,) per cell of a line, whether a ray of the camera (at ``camera``, (3,)) crossed it
+    there at height ``over`` or higher on its way to a horizontal surface (``flat``, (F, 3):
+    the ceiling) more than a furniture's depth behind it: space beyond the line where a
+    door's lintel would have stopped the ray (the ceiling over a wardrobe, seen past its
+    front, lies closer)."""
+    o, r = 1 - axis, axis
+    side = np.sign(camera[o] - offset)
+    depth = (offset - flat[:, o]) * side  # > 0 behind the line, seen from the camera
+    behind = flat[(depth > MAX_FURNITURE_DEPTH) & (depth <= _SEEN_THROUGH_REACH)]
+    if len(behind) == 0 or side == 0:
+        return np.zeros(n_cells, dtype=bool)
+    t = (offset - camera[o]) / (behind[:, o] - camera[o])
+    height = camera[2] + t * (behind[:, 2] - camera[2])
+    run = camera[r] + t * (behind[:, r] - camera[r])
+    cells = np.floor((run[height >= over] - origin) / cell).astype(np.int64)
+    cells = cells[(cells >= 0) & (cells < n_cells)]
+    return np.bincount(cells, minlength=n_cells) > 0
+
+
 def _framed(keys: NDArray[np.int64], n_cells: int, s: float) -> NDArray[np.bool_]:
     """(C,) cells whose wall points leave a gap of ``_WINDOW_HEIGHT`` or more that ends over
     ``_LINTEL_LOW``: wall under and over a window (or a picture, a screen hiding it), which
@@ -527,15 +571,16 @@ def _lines_from_peak(
     grid: _Grid,
     rule: _TallRule,
     params: LayoutParams,
-    flat_xy: FloatArray,
+    flat: FloatArray,
 ) -> list[WallLine]:
     """Evidence along one line from its member points (aligned frame, (M, 3)).
 
     Each side is tried as the interior: a line yields one wall per side whose cells bound
     the scanned space from that side (two walls when collinear walls face each other).
-    flat_xy: (F, 2) the fragment's horizontal-surface points (floor, ceiling), aligned frame;
+    flat: (F, 3) the fragment's horizontal-surface points (floor, ceiling), aligned frame;
     with a single camera, what is seen behind a cell is counted where its ray crosses the line.
     """
+    flat_xy = flat[:, :2]
     s = params.cell_size
     origin = grid.origin[axis]
     cells = ((members[:, axis] - origin) / s).astype(np.int64)
@@ -560,11 +605,15 @@ def _lines_from_peak(
     tall = ((bins >= least_n) | (lintel & (bins >= _LINTEL_BINS))) & (near_reach >= least_top)
     behind, front = grid.strip_sums(axis, offset, np.arange(n_cells))
     one_camera = len(rule.views) == 1
+    open_above = None
     if one_camera:
         # One camera: what was seen behind a cell is what its rays saw through that cell, not
         # the floor seen through a door beside it.
         centre = rule.views[0].centre[:2]
         crossing = _ray_crossings(axis, offset, flat_xy, centre, origin, s, n_cells)
+        over = rule.floor_z + _OVER_DOORS
+        camera = rule.views[0].centre
+        open_above = _seen_over_doors(axis, offset, flat, camera, over, origin, s, n_cells)
         if centre[1 - axis] > offset:
             behind = crossing
         else:
@@ -607,6 +656,7 @@ def _lines_from_peak(
                 seen_through,
                 occupied,
                 lintel,
+                open_above,
             )
         )
     return lines
@@ -841,11 +891,12 @@ def find_wall_lines(
         horizon=_Horizon.of(views[0].centre, aligned[in_band]) if len(views) == 1 else None,
         reach_cells=_THIN_REACH_CELLS if thin else 0,
     )
-    flat_xy = aligned[horizontal, :2]
+    flat = aligned[horizontal]
+    flat_xy = flat[:, :2]
 
     def along(axis: int, on: _Grid) -> list[WallLine]:
         facing = in_band & (np.abs(normals[:, 1 - axis]) > _AXIS_COS)
-        return _axis_lines(axis, aligned[facing], on, rule, params, flat_xy)
+        return _axis_lines(axis, aligned[facing], on, rule, params, flat)
 
     first = [along(0, grid), along(1, grid)]
     lines = first[0] + first[1]
@@ -893,7 +944,7 @@ def _axis_lines(
     grid: _Grid,
     rule: _TallRule,
     params: LayoutParams,
-    flat_xy: FloatArray,
+    flat: FloatArray,
 ) -> list[WallLine]:
     """The wall lines along ``axis`` of the wall points facing across it, strongest first."""
     offset_axis = 1 - axis
@@ -905,7 +956,7 @@ def _axis_lines(
         if len(members) == 0:
             continue  # a peak of the binned histogram can fall between the points
         offset = float(np.median(members[:, offset_axis]))
-        lines += _lines_from_peak(axis, offset, members, grid, rule, params, flat_xy)
+        lines += _lines_from_peak(axis, offset, members, grid, rule, params, flat)
     return lines
 
 

@@ -15,6 +15,7 @@ from services.synthetic import SceneSpec, generate_scene
 from services.synthetic.render import KINECT
 from services.wall_graph import find_wall_chain
 from services.wall_lines import (
+    MAX_OPEN_ABOVE,
     WallLine,
     _closes_an_arm,
     _doors_closed,
@@ -844,3 +845,72 @@ def test_stray_points_high_over_a_walls_line_are_no_doorway_to_see_a_wall_throug
     near = _line_with_opening(1.0, wall, strays, [[0.0, 2.0], [4.0, 6.0]])
     near = dataclasses.replace(near, seen_through=doorway.copy())
     assert not _seen_through_opening(behind, [near, behind])
+
+
+def _wall_ending_where_the_room_goes_on(
+    rng: np.random.Generator, doorway: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """What a level camera at the origin (1.4 m over the floor, ceiling 1.3 m over it,
+    looking along +y) sees of a wall at y = 3 from x = -1.5 to 0.2, past which the room goes
+    on (floor beyond, and the ceiling 0.8-1.6 m beyond: rays to it cross y = 3 at 2.4-2.6 m
+    over the floor); with ``doorway`` the wall goes on to x = 1.5 instead, with a door at
+    x = 0.3-1.2 whose lintel (2.1 m) lets through only rays to the floor or to the
+    ceiling 2.6 m beyond and more."""
+    parts, normals = [], []
+
+    def add(points: np.ndarray, normal: tuple[float, float, float]) -> None:
+        parts.append(points)
+        normals.append(np.tile(normal, (len(points), 1)))
+
+    x, z = rng.uniform(-1.5, 1.5 if doorway else 0.2, 8000), rng.uniform(-1.4, 1.3, 8000)
+    wall = ~((x > 0.3) & (x < 1.2) & (z < 0.7)) if doorway else np.ones(len(x), bool)
+    add(np.column_stack([x[wall], np.full(wall.sum(), 3.0), z[wall]]), (0.0, -1.0, 0.0))
+    x, y = rng.uniform(-1.5, 1.5, 6000), rng.uniform(1.5, 3.0, 6000)
+    add(np.column_stack([x, y, np.full_like(x, -1.4)]), (0.0, 0.0, 1.0))
+    x, y = rng.uniform(0.35, 1.15, 3000), rng.uniform(3.2, 6.0, 3000)
+    add(np.column_stack([x, y, np.full_like(x, -1.4)]), (0.0, 0.0, 1.0))
+    x = rng.uniform(0.35, 1.15, 3000)
+    y = rng.uniform(5.6, 6.0, 3000) if doorway else rng.uniform(3.8, 4.6, 3000)
+    add(np.column_stack([x, y, np.full_like(x, 1.3)]), (0.0, 0.0, -1.0))
+    return np.vstack(parts), np.vstack(normals)
+
+
+@pytest.mark.parametrize("doorway", [False, True])
+def test_a_line_seen_through_over_a_doors_top_is_where_the_room_goes_on(doorway: bool) -> None:
+    points, normals = _wall_ending_where_the_room_goes_on(np.random.default_rng(8), doorway)
+    lines = find_wall_lines(points, normals, -1.4, 1.3, LayoutParams(), [_level_kinect_at_origin()])
+    (wall,) = [
+        ln for ln in lines if ln.axis == 0 and abs(ln.offset - 3.0) < 0.05 and not ln.virtual
+    ]
+    assert wall.crossing_gap(0.3, 1.2) > 0.5  # the floor beyond is seen either way
+    if doorway:  # the lintel stops every ray over 2.1 m: it may be a door
+        assert wall.open_above_gap(0.3, 1.2) == 0.0
+    else:  # rays crossed it at 2.4 m and up: no door is that tall, no wall stands there
+        assert wall.open_above_gap(0.3, 1.2) > MAX_OPEN_ABOVE
+    assert wall.open_above_gap(-1.5, 0.1) == 0.0  # nor where the wall stands
+
+
+def test_a_frames_chain_does_not_bridge_where_its_camera_saw_the_room_go_on_over_doors(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The room of the test above goes on past the wall's end into an arm whose far side,
+    # x = 1.2, faces the camera: its line meets the wall's at (1.2, 3), 1 m on, across the
+    # arm's mouth, which rays crossed 2.4 m and more over the floor.
+    rng = np.random.default_rng(9)
+    points, normals = _wall_ending_where_the_room_goes_on(rng, doorway=False)
+    y, z = rng.uniform(1.5, 5.0, 6000), rng.uniform(-1.4, 1.3, 6000)
+    side = np.column_stack([np.full_like(y, 1.2), y, z])
+    points = np.vstack([points, side])
+    normals = np.vstack([normals, np.tile([-1.0, 0.0, 0.0], (len(side), 1))])
+    views = [_level_kinect_at_origin()]
+    lines = find_wall_lines(points, normals, -1.4, 1.3, LayoutParams(), views)
+
+    def corners(limit: float) -> np.ndarray:
+        monkeypatch.setattr("services.wall_graph.MAX_OPEN_ABOVE", limit)
+        chain = find_wall_chain(lines, LayoutParams(), views)
+        assert chain is not None
+        return chain.keypoints
+
+    across = np.array([1.2, 3.0])
+    assert np.min(np.linalg.norm(corners(np.inf) - across, axis=1)) < 0.1  # as it did
+    assert np.min(np.linalg.norm(corners(MAX_OPEN_ABOVE) - across, axis=1)) > 0.5
