@@ -19,7 +19,8 @@ unexplained wall) keep their ceilings.
 Each DIR is a ``bench.outside.run frames`` draw (its scenes' ``score.json``). It prints the
 map, the parameters to ``--set``, and the Brier score and a reliability table of the fit and
 check draws before and after (the new confidences computed from the old, offline: run the
-draws again with the new parameters to measure them through the pipeline).
+check draws again with the new parameters, ``bench.outside.run frames ... --in-process
+--rerun --set ...``, to measure them through the pipeline).
 """
 
 from __future__ import annotations
