@@ -481,6 +481,31 @@ class _TallRule:
         return n, top
 
 
+def _depth_behind(axis: int, offset: float, points: FloatArray, camera: FloatArray) -> FloatArray:
+    """(P,) how far (m) each point (P, 2 or 3) lies behind a line as seen from ``camera``:
+    positive on the far side, 0 for every point when the camera stands on the line."""
+    o = 1 - axis
+    depth: FloatArray = (offset - points[:, o]) * np.sign(camera[o] - offset)
+    return depth
+
+
+def _sight_crossings(
+    axis: int, offset: float, behind: FloatArray, camera: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Where the sight lines from ``camera`` to points behind a line cross it: the share
+    of the way to each point, and the run coordinate along the line."""
+    o, r = 1 - axis, axis
+    t = (offset - camera[o]) / (behind[:, o] - camera[o])
+    run: FloatArray = camera[r] + t * (behind[:, r] - camera[r])
+    return t, run
+
+
+def _per_cell(run: FloatArray, origin: float, cell: float, n_cells: int) -> NDArray[np.int64]:
+    """(C,) how many of the run coordinates fall in each cell of a line."""
+    cells = np.floor((run - origin) / cell).astype(np.int64)
+    return np.bincount(cells[(cells >= 0) & (cells < n_cells)], minlength=n_cells)
+
+
 def _ray_crossings(
     axis: int,
     offset: float,
@@ -493,17 +518,10 @@ def _ray_crossings(
     """(C,) per cell of a line, the scanned points behind it (seen from ``centre``, 0.12-1 m
     behind) whose line of sight crosses the line in that cell: space seen through the cell
     itself, not through a door or window beside it."""
-    o, r = 1 - axis, axis
-    side = np.sign(centre[o] - offset)
-    depth = (offset - flat_xy[:, o]) * side  # > 0 behind the line, seen from the centre
+    depth = _depth_behind(axis, offset, flat_xy, centre)
     behind = flat_xy[(depth >= _NEAR_STRIP) & (depth <= _FAR_STRIP)]
-    if len(behind) == 0 or side == 0:
-        return np.zeros(n_cells)
-    t = (offset - centre[o]) / (behind[:, o] - centre[o])
-    run = centre[r] + t * (behind[:, r] - centre[r])
-    cells = np.floor((run - origin) / cell).astype(np.int64)
-    cells = cells[(cells >= 0) & (cells < n_cells)]
-    return np.bincount(cells, minlength=n_cells).astype(np.float64)
+    _, run = _sight_crossings(axis, offset, behind, centre)
+    return _per_cell(run, origin, cell, n_cells).astype(np.float64)
 
 
 def _seen_over_doors(
@@ -521,18 +539,11 @@ def _seen_over_doors(
     the ceiling) more than a furniture's depth behind it: space beyond the line where a
     door's lintel would have stopped the ray (the ceiling over a wardrobe, seen past its
     front, lies closer)."""
-    o, r = 1 - axis, axis
-    side = np.sign(camera[o] - offset)
-    depth = (offset - flat[:, o]) * side  # > 0 behind the line, seen from the camera
+    depth = _depth_behind(axis, offset, flat, camera)
     behind = flat[(depth > MAX_FURNITURE_DEPTH) & (depth <= _SEEN_THROUGH_REACH)]
-    if len(behind) == 0 or side == 0:
-        return np.zeros(n_cells, dtype=bool)
-    t = (offset - camera[o]) / (behind[:, o] - camera[o])
+    t, run = _sight_crossings(axis, offset, behind, camera)
     height = camera[2] + t * (behind[:, 2] - camera[2])
-    run = camera[r] + t * (behind[:, r] - camera[r])
-    cells = np.floor((run[height >= over] - origin) / cell).astype(np.int64)
-    cells = cells[(cells >= 0) & (cells < n_cells)]
-    return np.bincount(cells, minlength=n_cells) > 0
+    return _per_cell(run[height >= over], origin, cell, n_cells) > 0
 
 
 def _framed(keys: NDArray[np.int64], n_cells: int, s: float) -> NDArray[np.bool_]:
