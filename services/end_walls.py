@@ -25,6 +25,7 @@ from dataclasses import replace
 import numpy as np
 
 from services.frame_layout import side_like
+from services.geometry import cross
 from services.types import LocalLayout
 
 __all__ = ["END_WALLS", "flattened_end_step", "without_end_wall"]
@@ -85,8 +86,8 @@ def _trimmable(layout: LocalLayout, limit: float, least_view: float, least_keypo
 
 def _turn(a: np.ndarray, b: np.ndarray) -> int:
     """+1 for a left (convex) turn from heading a to heading b, -1 for a right one, 0 else."""
-    cross = float(a[0] * b[1] - a[1] * b[0])
-    return 1 if cross > 1e-9 else (-1 if cross < -1e-9 else 0)
+    z = float(cross(a, b))
+    return 1 if z > 1e-9 else (-1 if z < -1e-9 else 0)
 
 
 def flattened_end_step(

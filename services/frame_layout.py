@@ -27,7 +27,7 @@ from services.frustum import (
     view_angle,
     visible_band,
 )
-from services.geometry import unique_cells
+from services.geometry import cross, unique_cells
 from services.local_layout import FOOTPRINT_CELL, boundary_points, footprint_cells
 from services.manhattan import (
     OrientedCloud,
@@ -272,7 +272,7 @@ _RAY_NEAR, _RAY_FAR = 0.3, 0.2  # m, ray parts not looked at: at the camera, at 
 
 def _cross(a: FloatArray, b: FloatArray) -> float:
     """The cross product of two floor-plan vectors (its z): > 0 when b turns left of a."""
-    return float(a[0] * b[1] - a[1] * b[0])
+    return float(cross(a, b))
 
 
 def _past_corner_fronts(keypoints: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
@@ -303,8 +303,8 @@ def _reach_past_turn(kp: FloatArray, a: int, c: int, e: int, lines: Sequence[Wal
     turn at ``c`` onto the end wall towards ``e``, when that says the turn came early
     (0.2-1 m: a furniture front's depth); else 0."""
     along, turn = _unit(kp[c] - kp[a]), _unit(kp[e] - kp[c])
-    cross = _cross(along, turn)
-    if (cross if e > c else -cross) < 0.5:
+    left = _cross(along, turn)
+    if (left if e > c else -left) < 0.5:
         return 0.0  # not a left turn in chain order
     line = wall_line_of(lines, *((kp[a], kp[c]) if e > c else (kp[c], kp[a])))
     if line is None:

@@ -16,6 +16,7 @@ from services.types import FloatArray
 __all__ = [
     "column_max",
     "column_min",
+    "cross",
     "distance_to_chain",
     "distance_to_polygon",
     "is_simple_rectilinear",
@@ -30,6 +31,17 @@ ScalarT = TypeVar("ScalarT", bound=np.generic)
 
 _HALF = np.int64(1 << 31)
 _LOW = np.int64(0xFFFFFFFF)
+
+
+def cross(a: FloatArray, b: FloatArray) -> FloatArray:
+    """The z of the cross product of floor-plan vectors, (2,) or (N, 2) each: > 0 where b
+    turns left of a.
+
+    >>> float(cross(np.array([1.0, 0.0]), np.array([0.0, 2.0])))
+    2.0
+    """
+    out: FloatArray = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
 
 
 def signed_area(polygon: FloatArray) -> float:

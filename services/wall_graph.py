@@ -19,6 +19,7 @@ from scipy.sparse.csgraph import dijkstra, minimum_spanning_tree
 
 from schemas.params import LayoutParams
 from services.frustum import CameraView, in_any_view
+from services.geometry import cross
 from services.types import FloatArray
 from services.wall_lines import MAX_DOORWAY, MAX_OPEN_ABOVE, WallLine, run_axis
 
@@ -408,8 +409,7 @@ def _corners_only(points: FloatArray) -> FloatArray:
         return points
     d_prev = points[1:-1] - points[:-2]
     d_next = points[2:] - points[1:-1]
-    cross = d_prev[:, 0] * d_next[:, 1] - d_prev[:, 1] * d_next[:, 0]
-    keep = np.concatenate([[True], np.abs(cross) > 1e-6, [True]])
+    keep = np.concatenate([[True], np.abs(cross(d_prev, d_next)) > 1e-6, [True]])
     kept: FloatArray = points[keep]
     return kept
 
@@ -460,10 +460,7 @@ def _faces(chain: FloatArray, centre: FloatArray) -> bool:
     >>> _faces(wall, np.zeros(2)), _faces(wall[::-1], np.zeros(2))
     (False, True)
     """
-    along = np.diff(chain, axis=0)
-    to_centre = centre - chain[:-1]
-    left = along[:, 0] * to_centre[:, 1] - along[:, 1] * to_centre[:, 0]
-    return bool(np.any(left > 0.0))
+    return bool(np.any(cross(np.diff(chain, axis=0), centre - chain[:-1]) > 0.0))
 
 
 def find_wall_chain(
@@ -546,7 +543,7 @@ def _units(points: FloatArray) -> FloatArray | None:
 
 def _right_of(a: FloatArray, b: FloatArray) -> bool:
     """Whether direction b is a right turn from direction a."""
-    return bool(a[0] * b[1] - a[1] * b[0] < -0.5)
+    return bool(cross(a, b) < -0.5)
 
 
 def _wall_stands(
