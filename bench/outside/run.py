@@ -13,8 +13,8 @@ with one thread (``OMP_NUM_THREADS=1``). The tables also go to ``DIR/report.md``
 scores to ``DIR/scores.jsonl``. Real outlines are skipped, with a message, when the shapes
 file is missing.
 
-``--in-process`` aligns each scene in the worker (``read_fragments`` and ``align_fragments``,
-as ``jigsaw align`` does, about five times faster; its times are not the CLI's) and accepts
+``--in-process`` runs ``jigsaw align`` in the worker (:func:`cli.pipeline.run_align`, about
+five times faster without a process per scene; its times are not the CLI's) and accepts
 ``--set SECTION.FIELD=VALUE`` to try parameters; ``--rerun`` aligns scenes already scored
 again (their generated files are kept), to compare settings on the same scenes.
 """
@@ -138,26 +138,17 @@ def _run_cli(inputs: list[Path], out: Path, timeout: float) -> tuple[Any, float,
 def _run_in_process(
     inputs: list[Path], out: Path, settings: Iterable[str]
 ) -> tuple[Any, float, str]:
-    """What :func:`_run_cli` gives, with the pipeline run in this process under the
-    parameters ``settings`` (``SECTION.FIELD=VALUE``): exit code 0 with the result written,
-    2 when no input is usable, 1 on an internal failure (its message in the stderr text)."""
-    from cli.pipeline import read_fragments  # open3d: imported in the workers only
-    from services.pipeline import align_fragments
+    """What :func:`_run_cli` gives, with ``jigsaw align`` run in this process
+    (:func:`cli.pipeline.run_align`, its exit codes and stderr) under the parameters
+    ``settings`` (``SECTION.FIELD=VALUE``)."""
+    from cli.pipeline import run_align  # open3d: imported in the workers only
 
     out.unlink(missing_ok=True)
     err = io.StringIO()
     t0 = time.time()
-    try:
-        with contextlib.redirect_stderr(err):
-            params = params_with(settings)
-            fragments = read_fragments(inputs, params)
-            if not fragments:
-                return 2, time.time() - t0, err.getvalue() + "error: no usable fragment\n"
-            result = align_fragments(fragments, params).result
-        out.write_text(json.dumps(result.model_dump(mode="json")))
-    except Exception as exc:  # scored as no result, as the CLI's exit code 1 is
-        return 1, time.time() - t0, f"{err.getvalue()}internal error: {type(exc).__name__}: {exc}\n"
-    return 0, time.time() - t0, err.getvalue()
+    with contextlib.redirect_stderr(err):
+        rc = run_align(inputs, out, params_with(settings))
+    return rc, time.time() - t0, err.getvalue()
 
 
 def _read_json(path: Path) -> Any:
