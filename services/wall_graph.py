@@ -86,7 +86,10 @@ def _add_corners(lines: list[WallLine], nodes: _Nodes) -> None:
             # a runs along x at y = a.offset; b runs along y at x = b.offset.
             near_a = min(_span_gap(seg, b.offset) for seg in a.segments)
             near_b = min(_span_gap(seg, a.offset) for seg in b.segments)
-            if near_a <= _CORNER_REACH and near_b <= _CORNER_REACH:
+            # A deduced wall spans exactly the step it bridges: no corner past its ends.
+            reach_a = _SNAP_CELLS * a.cell_size if a.virtual else _CORNER_REACH
+            reach_b = _SNAP_CELLS * b.cell_size if b.virtual else _CORNER_REACH
+            if near_a <= reach_a and near_b <= reach_b:
                 corner = np.array([b.offset, a.offset])
                 nodes.add(corner, [(i, b.offset), (j, a.offset)])
 

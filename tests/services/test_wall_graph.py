@@ -364,3 +364,22 @@ def test_a_frame_chain_shows_the_camera_a_wall_from_inside() -> None:
     found = _frustum_path(weights, points, [view])
     assert found is not None
     assert found[0] == [2, 3]
+
+
+@pytest.mark.parametrize("deduced", [True, False])
+def test_a_deduced_wall_makes_no_corner_past_the_step_it_bridges(deduced: bool) -> None:
+    """One camera saw a wall along y at x = -1.2 end at y = 1 and a farther one at
+    x = -3.7 (an arm of an L behind a pier): the hidden wall between them runs along
+    x at y = 1 from x = -3.7 to -1.2. A wall along y at x = 1.4, seen from y = 1.4 on,
+    would meet that line 2.6 m past the bridge's end, across floor the camera saw: a
+    seen wall may be carried that far to a corner, a deduced one not."""
+    from services.wall_lines import _bridge
+
+    near = _line(1, -1.2, -1, [(0.5, 1.0)])
+    far = _line(1, -3.7, -1, [(3.0, 3.8)])
+    step = _bridge(far, near, 1.0) if deduced else _line(0, 1.0, 1, [(-3.7, -1.2)])
+    side = _line(1, 1.4, 1, [(1.4, 3.8)])
+    nodes = _build_nodes([near, far, step, side])
+    corner = np.array([1.4, 1.0])
+    found = any(np.allclose(p, corner, atol=1e-6) for p in nodes.points)
+    assert found is not deduced
