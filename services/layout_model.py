@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from services.geometry import signed_area
+from services.geometry import cross, signed_area
 from services.placement import Piece, rot90
 from services.placement.corners import corner_offsets, corner_view
 from services.types import FloatArray
@@ -36,8 +36,7 @@ def _simplify(points: FloatArray, tolerance: float = 1e-3) -> FloatArray:
         if short.any() and (~short).sum() >= 3:
             pts = pts[~short]
             continue
-        cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
-        drop = np.abs(cross) < tolerance * np.maximum(np.linalg.norm(b, axis=1), 1e-9)
+        drop = np.abs(cross(a, b)) < tolerance * np.maximum(np.linalg.norm(b, axis=1), 1e-9)
         if not drop.any():
             return pts
         pts = pts[~drop] if (~drop).sum() >= 3 else pts[:3]

@@ -34,6 +34,7 @@ from typing import Literal
 
 import numpy as np
 
+from services.geometry import cross
 from services.types import FloatArray
 from services.wall_lines import WallLine, run_axis, wall_line_of
 
@@ -179,7 +180,7 @@ def _contradicted(kp: FloatArray, i: int, lines: Sequence[WallLine]) -> Keep | N
     did not see): the part before ("before"); and the other way round ("after").
     """
     before, after = kp[i] - kp[i - 1], kp[i + 1] - kp[i]
-    turn = float(before[0] * after[1] - before[1] * after[0])
+    turn = float(cross(before, after))
     a, b = run_axis(before), run_axis(after)
     forward = 1 if before[a] > 0 else -1
     backward = -1 if after[b] > 0 else 1

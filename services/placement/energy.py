@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from schemas.params import PlacementParams
-from services.geometry import distance_to_polygon, points_in_polygon
+from services.geometry import cross, distance_to_polygon, points_in_polygon
 from services.placement.pieces import UNIT, Piece, evidence_share
 from services.types import FloatArray
 
@@ -182,7 +182,7 @@ def hull_edges(points: FloatArray) -> int:
         prev, nxt = np.roll(hull, 1, axis=0), np.roll(hull, -1, axis=0)
         chord = nxt - prev
         lever = hull - prev
-        off = np.abs(chord[:, 0] * lever[:, 1] - chord[:, 1] * lever[:, 0])
+        off = np.abs(cross(chord, lever))
         off /= np.maximum(np.linalg.norm(chord, axis=1), 1e-9)
         weakest = int(np.argmin(off))
         if off[weakest] >= _HULL_TOLERANCE:

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from services.geometry import cross
 from services.synthetic.room import Room
 from services.synthetic.scan import Stretch
 from services.types import FloatArray
@@ -182,8 +183,7 @@ def cut_turns(room: Room, cuts: list[Cut]) -> list[int]:
     +1, a reflex one -1; 0 for a straight junction.
     """
     before = np.roll(room.dirs, 1, axis=0)  # the edge arriving at vertex v, (V, 2)
-    cross = before[:, 0] * room.dirs[:, 1] - before[:, 1] * room.dirs[:, 0]
-    signs = np.where(cross > 0.0, 1, -1)
+    signs = np.where(cross(before, room.dirs) > 0.0, 1, -1)
     turns = []
     for e, t, gap in cuts:
         low = room.arcs[e] + t - 0.5 * abs(gap)

@@ -35,7 +35,7 @@ import open3d as o3d
 from numpy.typing import NDArray
 
 from schemas.frames import IntrinsicsModel
-from services.geometry import points_in_polygon
+from services.geometry import cross, points_in_polygon
 from services.rgbd import RgbdFrame
 from services.synthetic.families import pick_family, random_room
 from services.synthetic.furniture import Box, Furnishing, furnish_room
@@ -197,8 +197,8 @@ def _wall_boxes(room: Room, furnishing: Furnishing) -> list[tuple[FloatArray, Fl
     for e in range(n):
         d, normal, length = room.dirs[e], room.normals[e], float(room.lengths[e])
         before, after = room.dirs[e - 1], room.dirs[(e + 1) % n]
-        convex_before = before[0] * d[1] - before[1] * d[0] > 0
-        convex_after = d[0] * after[1] - d[1] * after[0] > 0
+        convex_before = cross(before, d) > 0
+        convex_after = cross(d, after) > 0
         t_lo = -thick if convex_before else 0.0
         t_hi = length + thick if convex_after else length
         holes = [o for o in furnishing.openings if o.edge == e]

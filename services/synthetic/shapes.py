@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from services.geometry import signed_area
+from services.geometry import cross, signed_area
 from services.types import FloatArray
 
 __all__ = ["OutlineLimits", "clean_outline", "dominant_angle", "is_simple_rectilinear"]
@@ -114,7 +114,7 @@ def is_simple_rectilinear(polygon: FloatArray) -> bool:
     delta = np.roll(polygon, -1, axis=0) - polygon
     following = np.roll(delta, -1, axis=0)
     axis_aligned = (delta[:, 0] == 0.0) ^ (delta[:, 1] == 0.0)
-    turns = delta[:, 0] * following[:, 1] - delta[:, 1] * following[:, 0] != 0.0
+    turns = cross(delta, following) != 0.0
     if not (axis_aligned.all() and turns.all()):
         return False
     lo = np.minimum(polygon, np.roll(polygon, -1, axis=0))
