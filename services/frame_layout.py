@@ -270,11 +270,6 @@ _RAY_WIDTH = 0.05  # m, a point this close to a camera's ray blocked it
 _RAY_NEAR, _RAY_FAR = 0.3, 0.2  # m, ray parts not looked at: at the camera, at the wall
 
 
-def _cross(a: FloatArray, b: FloatArray) -> float:
-    """The cross product of two floor-plan vectors (its z): > 0 when b turns left of a."""
-    return float(cross(a, b))
-
-
 def _past_corner_fronts(keypoints: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
     """The chain with a last wall that turned early moved onto the room's corner.
 
@@ -303,7 +298,7 @@ def _reach_past_turn(kp: FloatArray, a: int, c: int, e: int, lines: Sequence[Wal
     turn at ``c`` onto the end wall towards ``e``, when that says the turn came early
     (0.2-1 m: a furniture front's depth); else 0."""
     along, turn = _unit(kp[c] - kp[a]), _unit(kp[e] - kp[c])
-    left = _cross(along, turn)
+    left = float(cross(along, turn))
     if (left if e > c else -left) < 0.5:
         return 0.0  # not a left turn in chain order
     line = wall_line_of(lines, *((kp[a], kp[c]) if e > c else (kp[c], kp[a])))
@@ -370,7 +365,7 @@ def _drop_end_reveals(keypoints: FloatArray) -> FloatArray:
     """
     return _drop_ends(
         keypoints,
-        lambda along, end, _: bool(_cross(along, end) < 0 and np.linalg.norm(end) < _MAX_REVEAL),
+        lambda along, end, _: bool(cross(along, end) < 0 and np.linalg.norm(end) < _MAX_REVEAL),
     )
 
 
@@ -433,7 +428,7 @@ def side_like(along: FloatArray, end: FloatArray, longest: float) -> bool:
     shorter than ``longest`` and than the wall ``along`` it meets (chain order), and stands
     on the room's side of that wall (its left)."""
     length = float(np.linalg.norm(end))
-    return _cross(along, end) > 0 and length < min(longest, float(np.linalg.norm(along)))
+    return bool(cross(along, end) > 0) and length < min(longest, float(np.linalg.norm(along)))
 
 
 def _seen_high(wall: FloatArray, views: Sequence[CameraView], floor_z: float) -> bool:
@@ -469,7 +464,7 @@ def _seen_over(
     tops = np.max(np.where(near, points[:, 2], floor_z), axis=1, initial=floor_z)
     spots = np.column_stack([columns, tops + _SEEN_OVER])
     for view in views:
-        if _cross(step, view.centre[:2] - wall[0]) <= 0:
+        if cross(step, view.centre[:2] - wall[0]) <= 0:
             continue  # behind the wall: it saw the other face, if anything
         low, high = view.band(columns)
         framed = (low <= spots[:, 2]) & (spots[:, 2] <= high)

@@ -510,15 +510,16 @@ def _ray_crossings(
     axis: int,
     offset: float,
     flat_xy: FloatArray,
+    depth: FloatArray,
     centre: FloatArray,
     origin: float,
     cell: float,
     n_cells: int,
 ) -> FloatArray:
     """(C,) per cell of a line, the scanned points behind it (seen from ``centre``, 0.12-1 m
-    behind) whose line of sight crosses the line in that cell: space seen through the cell
-    itself, not through a door or window beside it."""
-    depth = _depth_behind(axis, offset, flat_xy, centre)
+    behind; ``depth``: :func:`_depth_behind` of ``flat_xy``) whose line of sight crosses the
+    line in that cell: space seen through the cell itself, not through a door or window
+    beside it."""
     behind = flat_xy[(depth >= _NEAR_STRIP) & (depth <= _FAR_STRIP)]
     _, run = _sight_crossings(axis, offset, behind, centre)
     return _per_cell(run, origin, cell, n_cells).astype(np.float64)
@@ -528,6 +529,7 @@ def _seen_over_doors(
     axis: int,
     offset: float,
     flat: FloatArray,
+    depth: FloatArray,
     camera: FloatArray,
     over: float,
     origin: float,
@@ -538,8 +540,7 @@ def _seen_over_doors(
     there at height ``over`` or higher on its way to a horizontal surface (``flat``, (F, 3):
     the ceiling) more than a furniture's depth behind it: space beyond the line where a
     door's lintel would have stopped the ray (the ceiling over a wardrobe, seen past its
-    front, lies closer)."""
-    depth = _depth_behind(axis, offset, flat, camera)
+    front, lies closer). ``depth``: :func:`_depth_behind` of ``flat``."""
     behind = flat[(depth > MAX_FURNITURE_DEPTH) & (depth <= _SEEN_THROUGH_REACH)]
     t, run = _sight_crossings(axis, offset, behind, camera)
     height = camera[2] + t * (behind[:, 2] - camera[2])
@@ -620,11 +621,12 @@ def _lines_from_peak(
     if one_camera:
         # One camera: what was seen behind a cell is what its rays saw through that cell, not
         # the floor seen through a door beside it.
-        centre = rule.views[0].centre[:2]
-        crossing = _ray_crossings(axis, offset, flat_xy, centre, origin, s, n_cells)
-        over = rule.floor_z + _OVER_DOORS
         camera = rule.views[0].centre
-        open_above = _seen_over_doors(axis, offset, flat, camera, over, origin, s, n_cells)
+        centre = camera[:2]
+        depth = _depth_behind(axis, offset, flat_xy, centre)
+        crossing = _ray_crossings(axis, offset, flat_xy, depth, centre, origin, s, n_cells)
+        over = rule.floor_z + _OVER_DOORS
+        open_above = _seen_over_doors(axis, offset, flat, depth, camera, over, origin, s, n_cells)
         if centre[1 - axis] > offset:
             behind = crossing
         else:
