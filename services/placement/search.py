@@ -193,6 +193,7 @@ class _Search:
     # and the most a junction may turn (``turn_reach``: 2 where two corners turning alike
     # may be shared, else 1).
     sharing: NDArray[np.bool_] = field(init=False)
+    shares_any: bool = field(init=False)  # whether any junction may share corners
     shared_turn: NDArray[np.intp] = field(init=False)
     corner_at: FloatArray = field(init=False)
     last_len: FloatArray = field(init=False)
@@ -311,7 +312,8 @@ class _Search:
         turned = np.abs(self.shared_turn)[self.sharing.any(axis=0)]
         self.turn_reach = max(1, int(turned.max(initial=0)))
         self.least_spread = self.noise.straight_sigma**2
-        if self.sharing.any():
+        self.shares_any = bool(self.sharing.any())
+        if self.shares_any:
             self.least_spread = min(self.least_spread, self.noise.measured_sigma**2)
 
     def pair_evidence(self, led: Sequence[int]) -> _PairEvidence:
@@ -477,10 +479,11 @@ class _State:
     drift_vars: FloatArray
     owners: NDArray[np.intp]  # (S,) each sample's piece's place in the order (priors only)
     box: Box  # their bounds (x_lo, y_lo, x_hi, y_hi)
-    # (m, 4) each placed piece's free-space box (x_lo, y_lo, x_hi, y_hi) at its source: the
+    # Each placed piece's free-space box (x_lo, y_lo, x_hi, y_hi) at its source: the
     # conflict test's first filter without prior poses (with them the boxes move with the
-    # drift), kept as the loop grows rather than gathered per child.
-    free_at: FloatArray
+    # drift), kept as the loop grows rather than gathered per child; plain floats, since a
+    # loop over at most 16 boxes costs less than numpy's per-call overhead.
+    free_at: tuple[Box, ...]
     violated: tuple[int, ...] = ()  # indices of broken hint pairs
     resolved: frozenset[int] = frozenset()  # hint pairs already decided
     # The priors' costs per quarter turn q of the frame: the frame estimate takes its turn
@@ -645,7 +648,7 @@ def _conflict(
     rooms, refitted weights or not (README, *Accuracy and speed*).
     """
     hits = 0
-    at, free_at, margins = state.sources, state.free_at, np.zeros(len(state.order))
+    at, free_at, margins = state.sources, list(state.free_at), np.zeros(len(state.order))
     shifts = None
     if search.frame is not None:
         # Each placed piece relative to j: moved by the mean drift between them, and its
@@ -655,13 +658,13 @@ def _conflict(
         spread = np.sqrt(np.maximum(var_j - state.drift_vars, 0.0).max(axis=1))
         margins = search.params.conflict_drift_sigmas * spread
         at = state.sources + shifts
-        free_at = search.free_boxes[state.order, state.rotations] + at[:, _XYXY]
+        free_at = (search.free_boxes[state.order, state.rotations] + at[:, _XYXY]).tolist()
     # j's walls in the placed pieces' free spaces: only those whose box meets j's walls'
-    # (the test of _meets, all pieces at once).
+    # (the test of _meets).
     x0, y0, x1, y1 = box
-    meets = (x0 <= free_at[:, 2]) & (x1 >= free_at[:, 0])
-    meets &= (y0 <= free_at[:, 3]) & (y1 >= free_at[:, 1])
-    for k in np.flatnonzero(meets).tolist():
+    for k, (fx0, fy0, fx1, fy1) in enumerate(free_at):
+        if not (x0 <= fx1 and x1 >= fx0 and y0 <= fy1 and y1 >= fy0):
+            continue
         free = search.pieces[state.order[k]].rotated_free[state.rotations[k]]
         hits += free.hits(samples - at[k], float(margins[k]))
     free = search.pieces[j].rotated_free[rotation]
@@ -687,6 +690,10 @@ def _meets(box: Box, free: Box, at: FloatArray) -> bool:
         and box[1] <= free[3] + ay
         and box[3] >= free[1] + ay
     )
+
+
+def _shifted(box: Box, dx: float, dy: float) -> Box:
+    return (box[0] + dx, box[1] + dy, box[2] + dx, box[3] + dy)
 
 
 def _union(a: Box, b: Box) -> Box:
@@ -757,10 +764,8 @@ def _extend(
     features[_F["structure"]] += search.structure[prev, j]
     features[_F["boundary"]] += search.boundary[prev, j]
     # Shifting every sample by the source shifts their bounds by it (rounding is monotone).
-    x0, y0, x1, y1 = piece.sample_boxes[rotation]
     ex, ey = source.tolist()
-    box = (x0 + ex, y0 + ey, x1 + ex, y1 + ey)
-    box_shift = (ex, ey, ex, ey)
+    box = _shifted(piece.sample_boxes[rotation], ex, ey)
     drift = (drift_mean, drift_var)
     features[_F["conflict"]] += _conflict(search, state, j, rotation, samples, box, drift, source)
     rotations_cost = state.rotation_prior + search.turned_rotation_cost[j, rotation]
@@ -794,7 +799,7 @@ def _extend(
         drift_vars=drift_vars,
         owners=owners,
         box=_union(state.box, box),
-        free_at=np.concatenate([state.free_at, [search.free_boxes[j, rotation] + box_shift]]),
+        free_at=(*state.free_at, _shifted(piece.rotated_free[rotation].box, ex, ey)),
         violated=state.violated,
         resolved=state.resolved,
         rotation_prior=rotations_cost,
@@ -1064,10 +1069,11 @@ def _children(search: _Search, states: Sequence[_State]) -> _Children:
     shared = corners > 0
     rotation = (heading[parent] + turn - search.first_direction[piece]) % 4
     heading_in = (heading[parent] + turn) % 4
-    overlap = np.where(shared, search.last_len[last[parent]], np.nan)
+    back = np.where(shared, search.last_len[last[parent]], 0.0)
+    overlap = np.where(shared, back, np.nan)
     # Shared corners: back along the last piece's last wall, then along the child's chain
     # from its last shared corner to its source.
-    source = ends[parent] - np.nan_to_num(overlap)[:, None] * UNIT[heading[parent]]
+    source = ends[parent] - back[:, None] * UNIT[heading[parent]]
     source -= search.corner_at[piece, rotation, corners]
     child_end = source + search.chain_ends[piece, rotation]
     child_heading = (search.last_direction[piece] + rotation) % 4
@@ -1187,6 +1193,8 @@ def _with_shared(
     the most the junctions after the child may still turn (count, 1). A junction sharing
     corners turns back by as much as they turn."""
     parents, pieces, turns, corners = [parent], [piece], [turn], [np.zeros(len(parent), np.intp)]
+    if not search.shares_any:
+        return parent, piece, turn, corners[0]
     for k in range(1, MOST_SHARED + 1):
         sharing = remaining & search.sharing[last, :, k]
         if search.require_closed:
@@ -1471,7 +1479,7 @@ def _root(search: _Search) -> _State:
         drift_vars=np.full((1, 2), search.open_var),
         owners=np.zeros(len(samples), dtype=np.intp),
         box=first.sample_boxes[0],
-        free_at=search.free_boxes[0, 0][None].copy(),  # the first source is the origin
+        free_at=(first.rotated_free[0].box,),  # the first source is the origin
         rotation_prior=rotation_prior,
         anchors=tuple(
             a for a in (_anchor(search, 0, np.zeros(2), np.zeros(2), np.zeros(2)),) if a is not None
