@@ -228,6 +228,16 @@ class PlacementParams(_Frozen):
         "assemblies whose cameras each have a partner nearby, the one whose cameras stand "
         "at fewer stations is likelier; 0 turns it off",
     )
+    station_mate_cost: float = Field(
+        1.5,
+        ge=0,
+        description="RGB-D frames: what the stations term adds per pair of frames whose "
+        "views say they share their camera at one quarter turn (Piece.station_mates) that "
+        "an assembly turns otherwise: of the pairs passing that test on outside frame rooms "
+        "85 % shared the truth's camera and turn, so an assembly breaking one is about "
+        "log(0.85 / 0.15) = 1.7 nats less likely (outside frames seeds 22-27 and 28: 1.5 "
+        "and 3 gained alike, 3 also lost a room); 0 turns it off",
+    )
     end_wall_trial: float = Field(
         1.3,
         ge=0,

@@ -11,9 +11,14 @@ reach: cameras farther apart are other stations, and cost no more) over twice
 ``station_weight``. The second part is an Occam factor: a rival that turns a frame or two
 by a half turn can still give each camera a partner nearby, pairing them off at two
 stations where the truth has one, and each station more is one more position the room
-could have put anywhere. The search does not see the term (it is known only once a loop
-is refined), so it ranks the assemblies the search kept, as the floor seen outside them
-does. Clouds have no cameras: their placement is returned as it is.
+could have put anywhere. A third part prices the views' own word: two frames whose view
+ranges agree at one quarter turn (``Piece.station_mates``) are made to share their camera
+by the refinement only when the assembly turns them so; one that turns them otherwise
+pays ``station_mate_cost`` per such pair (:func:`broken_mates`), since of the pairs passing
+that test most share the truth's camera and turn. The search does not see the term (it is
+known only once a loop is refined), so it ranks the assemblies the search kept, as the
+floor seen outside them does. Clouds have no cameras: their placement is returned as it
+is.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ from services.refinement import placed_cameras, prior_anchors, refine_translatio
 from services.types import FloatArray
 
 __all__ = [
+    "broken_mates",
     "counts_stations",
     "refined_cameras",
     "station_cost",
@@ -112,8 +118,22 @@ def with_station_scored(
     if cand.missing:
         return cand
     cost = station_term(refined_cameras(cand, pieces, measured, params, hints), params)
+    cost += params.station_mate_cost * broken_mates(cand, pieces)
     features = {**cand.features, "stations": cost}
     return replace(cand, energy=cand.energy + params.station_weight * cost, features=features)
+
+
+def broken_mates(cand: PlacementCandidate, pieces: Sequence[Piece]) -> int:
+    """How many pairs of the candidate's pieces whose views say they share their camera at
+    one quarter turn (``Piece.station_mates``) it turns otherwise."""
+    by_id = {p.id: p for p in pieces}
+    turns = dict(zip(cand.order, cand.rotations, strict=True))
+    return sum(
+        1
+        for fid in cand.order
+        for other, turn in by_id[fid].station_mates
+        if fid < other and other in turns and (turns[other] - turns[fid]) % 4 != turn
+    )
 
 
 def station_term(cameras: Sequence[FloatArray], params: PlacementParams) -> float:

@@ -9,10 +9,17 @@ import numpy as np
 import pytest
 
 from schemas.params import PlacementParams
-from services.placement import Piece, place_pieces, rot90, translations_of
+from services.placement import (
+    Piece,
+    PlacementCandidate,
+    place_pieces,
+    rot90,
+    translations_of,
+)
 from services.placement.priors import PiecePrior, SiteHints
 from services.refinement import placed_cameras, prior_anchors, refine_translations
 from services.stations import (
+    broken_mates,
     refined_cameras,
     station_cost,
     station_count,
@@ -157,3 +164,32 @@ def test_the_refined_cameras_of_the_right_room_stand_at_its_stations() -> None:
     rival = next(c for c in placement.candidates if not c.missing and c.rotations != best.rotations)
     scattered = refined_cameras(rival, pieces, placement.measured, PlacementParams())
     assert station_count(scattered, PlacementParams().station_reach) > 2
+
+
+def test_frames_whose_views_share_a_camera_cost_the_assemblies_turning_them_otherwise() -> None:
+    # The bottom and right walls' frames were taken from one camera and their views agree
+    # at the truth's quarter turn between them (p1 turned 3 more than p0).
+    pieces = _frames(STATIONS)
+    pieces[0] = dataclasses.replace(pieces[0], station_mates=(("p1", 3),))
+    pieces[1] = dataclasses.replace(pieces[1], station_mates=(("p0", 1),))
+    placement = place_pieces(pieces)
+    assert placement is not None
+    truth = next(
+        c
+        for c in placement.candidates
+        if c.order == ("p0", "p1", "p2", "p3") and c.rotations == (0, 3, 2, 1)
+    )
+    assert broken_mates(truth, pieces) == 0
+
+    def p1_turn(cand: PlacementCandidate) -> int:
+        turns = dict(zip(cand.order, cand.rotations, strict=True))
+        return (turns["p1"] - turns["p0"]) % 4
+
+    turned = [c for c in placement.candidates if not c.missing and p1_turn(c) != 3]
+    assert turned  # some kept assembly turns p1 otherwise
+    assert all(broken_mates(c, pieces) == 1 for c in turned)
+    priced, free = PlacementParams(station_mate_cost=1.5), PlacementParams(station_mate_cost=0.0)
+    for cand in (truth, turned[0]):
+        cost = with_station_scored(cand, pieces, None, priced).features["stations"]
+        cost -= with_station_scored(cand, pieces, None, free).features["stations"]
+        assert cost == pytest.approx(1.5 * broken_mates(cand, pieces))
