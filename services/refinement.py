@@ -58,6 +58,7 @@ __all__ = [
     "refine_translations",
     "stray_anchors",
     "translation_spread",
+    "turned_as_views_say",
     "widest_slide",
 ]
 
@@ -416,6 +417,13 @@ def _with_stations(
     return refined
 
 
+def turned_as_views_say(turn: int | None, rotation: int, other_rotation: int) -> bool:
+    """Whether an assembly that turns a piece by ``rotation`` and another by
+    ``other_rotation`` quarter turns turns them as their views say (``turn``: the other's
+    entry in the piece's ``Piece.station_mates``; None: the views say nothing)."""
+    return turn is not None and (other_rotation - rotation) % 4 == turn
+
+
 def _stations(
     pieces: Sequence[Piece], rotations: Sequence[int], translations: FloatArray, reach: float
 ) -> list[_Station]:
@@ -429,7 +437,7 @@ def _stations(
     for i, k in itertools.combinations(range(len(pieces)), 2):
         if not (len(cameras[i]) and len(cameras[k])):
             continue
-        if mates[i].get(pieces[k].id) == (rotations[k] - rotations[i]) % 4:
+        if turned_as_views_say(mates[i].get(pieces[k].id), rotations[i], rotations[k]):
             out.append(_Station(i, cameras[i][0], k, cameras[k][0]))  # single frames
             continue
         first = cameras[i] + translations[i]

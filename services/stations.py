@@ -32,7 +32,12 @@ from scipy.sparse.csgraph import connected_components
 from schemas.params import PlacementParams
 from services.placement import Piece, Placement, PlacementCandidate, translations_of
 from services.placement.priors import SiteHints
-from services.refinement import placed_cameras, prior_anchors, refine_translations
+from services.refinement import (
+    placed_cameras,
+    prior_anchors,
+    refine_translations,
+    turned_as_views_say,
+)
 from services.types import FloatArray
 
 __all__ = [
@@ -132,7 +137,9 @@ def broken_mates(cand: PlacementCandidate, pieces: Sequence[Piece]) -> int:
         1
         for fid in cand.order
         for other, turn in by_id[fid].station_mates
-        if fid < other and other in turns and (turns[other] - turns[fid]) % 4 != turn
+        if fid < other
+        and other in turns
+        and not turned_as_views_say(turn, turns[fid], turns[other])
     )
 
 

@@ -648,7 +648,8 @@ def _conflict(
     rooms, refitted weights or not (README, *Accuracy and speed*).
     """
     hits = 0
-    at, free_at, margins = state.sources, list(state.free_at), np.zeros(len(state.order))
+    free_at: Sequence[Sequence[float]] = state.free_at
+    at, margins = state.sources, np.zeros(len(state.order))
     shifts = None
     if search.frame is not None:
         # Each placed piece relative to j: moved by the mean drift between them, and its
@@ -659,11 +660,9 @@ def _conflict(
         margins = search.params.conflict_drift_sigmas * spread
         at = state.sources + shifts
         free_at = (search.free_boxes[state.order, state.rotations] + at[:, _XYXY]).tolist()
-    # j's walls in the placed pieces' free spaces: only those whose box meets j's walls'
-    # (the test of _meets).
-    x0, y0, x1, y1 = box
-    for k, (fx0, fy0, fx1, fy1) in enumerate(free_at):
-        if not (x0 <= fx1 and x1 >= fx0 and y0 <= fy1 and y1 >= fy0):
+    # j's walls in the placed pieces' free spaces: only those whose box meets j's walls'.
+    for k, free_box in enumerate(free_at):
+        if not _meets(box, free_box):
             continue
         free = search.pieces[state.order[k]].rotated_free[state.rotations[k]]
         hits += free.hits(samples - at[k], float(margins[k]))
@@ -676,20 +675,15 @@ def _conflict(
         placed_margins = margins[state.owners]
         pad = float(np.abs(shifts).max())
     x0, y0, x1, y1 = state.box
-    if _meets((x0 - pad, y0 - pad, x1 + pad, y1 + pad), free.box, source):
+    ex, ey = source.tolist()
+    if _meets((x0 - pad, y0 - pad, x1 + pad, y1 + pad), _shifted(free.box, ex, ey)):
         hits += free.hits(placed_samples - source, placed_margins)
     return hits * SAMPLE_SPACING
 
 
-def _meets(box: Box, free: Box, at: FloatArray) -> bool:
-    """True when ``box`` overlaps the box ``free`` moved to ``at``."""
-    ax, ay = float(at[0]), float(at[1])
-    return (
-        box[0] <= free[2] + ax
-        and box[2] >= free[0] + ax
-        and box[1] <= free[3] + ay
-        and box[3] >= free[1] + ay
-    )
+def _meets(a: Sequence[float], b: Sequence[float]) -> bool:
+    """True when the boxes (x_lo, y_lo, x_hi, y_hi) overlap (touching counts)."""
+    return a[0] <= b[2] and a[2] >= b[0] and a[1] <= b[3] and a[3] >= b[1]
 
 
 def _shifted(box: Box, dx: float, dy: float) -> Box:
