@@ -76,12 +76,22 @@ _NEAR_CAMERA = 0.3  # m, standing surfaces closer to the camera are not looked a
 _COLUMN_DEGREES = 2.0  # bin of the view's columns a surface shows up in
 
 __all__ = [
+    "CHAIN_STAGES",
+    "ChainTrace",
     "FrameCamera",
     "estimate_frame_layout",
     "estimate_rgbd_layout",
     "frame_points",
     "side_like",
 ]
+
+
+# The steps a frame's chain goes through, in order (:func:`estimate_frame_layout`'s
+# ``trace``): the wall graph's chain, then furniture fronts and reveals taken out, ends moved
+# to the frustum's edges, corners a wall is seen past cut, furniture sides dropped at the
+# ends, and a one-wall chain seen through an opening moved onto the room's wall.
+CHAIN_STAGES = ("graph", "furniture", "frustum edges", "corners seen past", "end sides", "opening")
+ChainTrace = Callable[[str, FloatArray], None]  # (stage, (K, 2) keypoints, aligned frame)
 
 
 @dataclass(frozen=True)
@@ -727,6 +737,7 @@ def estimate_frame_layout(
     cameras: Sequence[FrameCamera],
     params: PipelineParams = PipelineParams(),
     progress: ProgressFn | None = None,
+    trace: ChainTrace | None = None,
 ) -> LocalLayout:
     """Estimate the wall chain seen by one or more RGB-D cameras.
 
@@ -737,6 +748,9 @@ def estimate_frame_layout(
     cameras : the cameras that saw them (at least one), posed in the local frame.
     params : all algorithm parameters (Manhattan and layout sections are used).
     progress : optional callback ``(stage, fraction)``.
+    trace : optional callback ``(stage, keypoints)`` called with the chain after each of
+        :data:`CHAIN_STAGES` it goes through (aligned frame; none without a chain): how
+        benchmarks tell which step made a chain wrong.
 
     Returns
     -------
@@ -809,13 +823,21 @@ def estimate_frame_layout(
             cameras=centres,
             view_ranges=ranges,
         )
-    kp = _to_frustum_edges(_without_furniture(chain.keypoints, lines), lines, views, ranges)
+    note = trace or (lambda stage, keypoints: None)
+    note("graph", chain.keypoints)
+    kp = _without_furniture(chain.keypoints, lines)
+    note("furniture", kp)
+    kp = _to_frustum_edges(kp, lines, views, ranges)
+    note("frustum edges", kp)
     kp = without_corners_seen_past(kp, lines)
+    note("corners seen past", kp)
     # An end wall's length is known once it reaches the view's edge.
     kp = _drop_end_sides(kp, views, aligned, frame.floor_z)
+    note("end sides", kp)
     if len(kp) == 2 and len(views) == 1:
         around = _wall_around_opening(kp, aligned, normals, frame.floor_z, views[0])
         kp = kp if around is None else around
+    note("opening", kp)
     band, depth = params.layout.end_region_beyond, params.layout.end_region_depth
     report("done", 1.0)
     return LocalLayout(
@@ -836,8 +858,10 @@ def estimate_rgbd_layout(
     frame: RgbdFrame,
     params: PipelineParams = PipelineParams(),
     progress: ProgressFn | None = None,
+    trace: ChainTrace | None = None,
 ) -> LocalLayout:
-    """Local layout of one RGB-D frame (its local frame is its optical frame)."""
+    """Local layout of one RGB-D frame (its local frame is its optical frame; ``trace`` as
+    :func:`estimate_frame_layout` takes it)."""
     return estimate_frame_layout(
-        frame_points(frame, params), [FrameCamera(frame.intrinsics)], params, progress
+        frame_points(frame, params), [FrameCamera(frame.intrinsics)], params, progress, trace
     )

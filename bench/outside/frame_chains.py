@@ -10,9 +10,12 @@ from the room's outline (:func:`chain_strays`): ``beyond`` the room (through a d
 window, an end run on past a corner) or ``within`` it (a step cut across, a front taken for
 the wall); wrong past ``WRONG`` metres either way. A chain cut short along the outline
 passes: this finds the chains that lead a room astray, not every chain a scorer would fail.
-A second table (:func:`overlap_table`) puts each right chain on the outline's perimeter
+Each wrong chain is also followed through the layout's steps
+(:data:`services.frame_layout.CHAIN_STAGES`): the first step whose chain strays past
+``WRONG`` made it wrong (:func:`stage_table`; the wall graph's own chain, or a rule after it).
+Another table (:func:`overlap_table`) puts each right chain on the outline's perimeter
 (:func:`chain_span`) and sets apart, per number of stations, the rooms whose neighbouring
-stretches overlap by more than :data:`BIG_OVERLAP` at a junction of their loop. A third
+stretches overlap by more than :data:`BIG_OVERLAP` at a junction of their loop. A last one
 (:func:`unseen_table`) sets apart, of the rooms whose every chain is right, those whose
 chains leave more than :data:`BIG_UNSEEN` of the outline unseen between two of them.
 
@@ -41,10 +44,11 @@ from bench.outside.score import true_fragments
 from bench.scoring import chain_samples
 from cli.frames import read_frame_dir
 from schemas.params import PipelineParams
-from services.fragments import fragment_layout
+from services.frame_layout import CHAIN_STAGES, estimate_rgbd_layout
 from services.geometry import distance_to_polygon, points_in_polygon
 from services.model_export import to_site
-from services.types import FloatArray
+from services.rgbd import RgbdFrame
+from services.types import FloatArray, LocalLayout
 
 __all__ = [
     "BIG_OVERLAP",
@@ -58,6 +62,7 @@ __all__ = [
     "main",
     "overlap_table",
     "room_chains",
+    "stage_table",
     "unseen_stretches",
     "unseen_table",
 ]
@@ -90,6 +95,9 @@ class FrameChain:
     span: tuple[float, float] | None = None
     stations: int = 0
     perimeter: float = 0.0
+    # A wrong chain: the first of the layout's steps (CHAIN_STAGES) whose chain strayed so,
+    # "no chain" without one; None for a right chain.
+    stage: str | None = None
 
     @property
     def wrong(self) -> bool:
@@ -182,19 +190,66 @@ def room_chains(
     perimeter = float(perimeter_cum(polygon)[0][-1])
     out = []
     for fid, (pose, _) in sorted(true_fragments(truth).items()):
-        layout = fragment_layout(read_frame_dir(folder / "frames" / fid, params), params)
-        span = None
+        layout, stages = _traced_layout(read_frame_dir(folder / "frames" / fid, params), params)
+        span, stage = None, None
         if layout.ok:
             chain = to_site(layout.keypoints_local(), pose)[:, :2]
             beyond, within = chain_strays(chain, polygon)
             if max(beyond, within) <= WRONG:
                 span = chain_span(chain, polygon)
+            else:
+                stage = _first_wrong(layout, stages, pose, polygon)
         else:
             beyond = within = float("inf")
+            stage = "no chain"
         out.append(
-            FrameChain(folder.name, camera, fid, beyond, within, right, span, stations, perimeter)
+            FrameChain(
+                folder.name, camera, fid, beyond, within, right, span, stations, perimeter, stage
+            )
         )
     return out
+
+
+def _traced_layout(
+    frame: RgbdFrame, params: PipelineParams
+) -> tuple[LocalLayout, list[tuple[str, FloatArray]]]:
+    """A frame's layout and its chain after each layout step (aligned frame)."""
+    stages: list[tuple[str, FloatArray]] = []
+    layout = estimate_rgbd_layout(frame, params, trace=lambda *step: stages.append(step))
+    return layout, stages
+
+
+def _first_wrong(
+    layout: LocalLayout,
+    stages: Sequence[tuple[str, FloatArray]],
+    pose: FloatArray,
+    polygon: FloatArray,
+) -> str:
+    """The first layout step whose chain (aligned frame, as traced) strays farther than
+    :data:`WRONG` from the outline, the frame placed with its true ``pose``."""
+    for stage, keypoints in stages:
+        if len(keypoints) < 2:
+            return stage
+        chain = to_site(layout.floor_points_local(keypoints), pose)[:, :2]
+        if max(chain_strays(chain, polygon)) > WRONG:
+            return stage
+    return stages[-1][0]  # the final chain strays; the last step's is that chain
+
+
+def stage_table(rows: Sequence[FrameChain]) -> str:
+    """Per camera: the wrong chains by the layout step that made them wrong
+    (:data:`services.frame_layout.CHAIN_STAGES`; "no chain" for frames without one)."""
+    columns = [*CHAIN_STAGES, "no chain"]
+    lines = [
+        "| camera | wrong chains | " + " | ".join(columns) + " |",
+        "|---|---|" + "---|" * len(columns),
+    ]
+    cameras = sorted({r.camera for r in rows})
+    for camera in [*cameras, "all"]:
+        wrong = [r for r in rows if r.wrong and camera in ("all", r.camera)]
+        counts = [sum(r.stage == column for r in wrong) for column in columns]
+        lines.append(f"| {camera} | {len(wrong)} | " + " | ".join(map(str, counts)) + " |")
+    return "\n".join(lines)
 
 
 def chain_table(rows: Sequence[FrameChain]) -> str:
@@ -308,9 +363,11 @@ def main(argv: list[str] | None = None) -> int:
                 verdict = {True: "room right", False: "room wrong", None: "not scored"}
                 print(
                     f"{r.room} {r.frame}: beyond {r.beyond:.2f} m, within {r.within:.2f} m "
-                    f"({verdict[r.room_right]})"
+                    f"({verdict[r.room_right]}; wrong from: {r.stage})"
                 )
     print(chain_table(rows))
+    print()
+    print(stage_table(rows))
     print()
     print(overlap_table(rows))
     print()

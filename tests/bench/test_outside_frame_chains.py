@@ -20,6 +20,7 @@ from bench.outside.frame_chains import (
     junction_overlaps,
     main,
     overlap_table,
+    stage_table,
     unseen_stretches,
     unseen_table,
 )
@@ -70,11 +71,28 @@ def test_a_draws_folder_is_judged_frame_by_frame(tmp_path: Path, capsys) -> None
     assert len(list(tmp_path.glob("*/truth.json"))) == 3
     rows = [line for line in out.splitlines() if line.startswith("| ")]
     ends = [k for k, row in enumerate(rows) if row.startswith("| all |")]
-    assert rows[0].startswith("| camera |") and len(ends) == 1
-    assert rows[ends[0] + 1].startswith("| stations |")
+    assert rows[0].startswith("| camera |") and len(ends) == 2
+    # The chain table, then the wrong chains by the step that made them wrong: as many.
+    assert rows[ends[0] + 1].startswith("| camera | wrong chains |")
+    assert rows[ends[0]].split("|")[3] == rows[ends[1]].split("|")[2]
+    assert rows[ends[1] + 1].startswith("| stations |")
     assert sum(row.startswith("| stations | rooms, every chain right |") for row in rows) == 1
     total = json.loads((folder / "truth.json").read_text())["n_frames"]
     assert f"| wide | {total} |" in out
+
+
+def test_the_stage_table_counts_wrong_chains_by_the_step_that_made_them_wrong():
+    rows = [
+        FrameChain("a", "wide", "f0", 1.2, 0.0, False, stage="graph"),
+        FrameChain("a", "wide", "f1", 0.0, 0.05, False),
+        FrameChain("b", "kinect", "f0", 0.0, 0.6, True, stage="frustum edges"),
+        FrameChain("c", "kinect", "f0", np.inf, np.inf, False, stage="no chain"),
+    ]
+    table = stage_table(rows).splitlines()
+    assert table[0].startswith("| camera | wrong chains | graph | furniture | frustum edges |")
+    assert table[2] == "| kinect | 2 | 0 | 0 | 1 | 0 | 0 | 0 | 1 |"
+    assert table[3] == "| wide | 1 | 1 | 0 | 0 | 0 | 0 | 0 | 0 |"
+    assert table[4] == "| all | 3 | 1 | 0 | 1 | 0 | 0 | 0 | 1 |"
 
 
 def test_a_chains_span_runs_along_the_outline_across_its_first_vertex():

@@ -11,7 +11,7 @@ import pytest
 from schemas.frames import IntrinsicsModel
 from schemas.params import PipelineParams
 from services.evaluation import evaluate_result, keypoint_error
-from services.frame_layout import estimate_rgbd_layout, frame_points
+from services.frame_layout import CHAIN_STAGES, estimate_rgbd_layout, frame_points
 from services.frustum import CameraView, in_any_view, view_angle, visible_band
 from services.local_layout import footprint_cells
 from services.pipeline import place_site
@@ -42,6 +42,16 @@ def test_frames_layouts_match_the_truth_and_their_up_axis_is_minus_y() -> None:
         assert np.degrees(np.arccos(np.clip(up @ truth_up, -1, 1))) < 1.0
         error = keypoint_error(layout.keypoints_local(), f.keypoints_local)
         assert error < 0.05 * f.diagonal, (f.id, error)
+
+
+def test_a_traced_layout_reports_its_chain_after_every_step_and_ends_with_its_own() -> None:
+    frame = three_frames(0).frames[0].frame
+    steps: list[tuple[str, np.ndarray]] = []
+    layout = estimate_rgbd_layout(frame, trace=lambda *step: steps.append(step))
+    assert [stage for stage, _ in steps] == list(CHAIN_STAGES)
+    np.testing.assert_array_equal(steps[-1][1], layout.keypoints)
+    untraced = estimate_rgbd_layout(frame)
+    np.testing.assert_array_equal(untraced.keypoints, layout.keypoints)
 
 
 def test_three_frames_make_the_right_room_with_poses_of_their_own_points() -> None:
