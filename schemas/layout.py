@@ -19,7 +19,7 @@ class LocalLayoutWire(BaseModel):
 
     Boundary points, the footprint, the unchained walls, the cameras and the view ranges are
     base64 little-endian float64 arrays ((M, 3), (F, 2), (W, 2), (C, 2) and (B, 2)) in the
-    aligned frame.
+    aligned frame; so are the runner-up chain's boundary points.
     """
 
     model_config = ConfigDict(frozen=True)
@@ -62,4 +62,15 @@ class LocalLayoutWire(BaseModel):
         description="RGB-D single frames: (B, 2) base64 per half degree of azimuth around the "
         "camera (aligned frame, radians) the horizontal distance of the walls seen, m; null "
         "for point clouds, merged frames and layouts stored before view ranges were kept",
+    )
+    runner_up: list[list[float]] | None = Field(
+        None,
+        description="RGB-D frames: (K', 2) aligned frame, the wall graph's second chain where "
+        "its two candidates differ, which the placement also tries; null otherwise",
+    )
+    runner_up_source_boundary: str = Field(
+        "", description="(M, 3) base64 boundary points around the runner-up's source"
+    )
+    runner_up_target_boundary: str = Field(
+        "", description="(M, 3) base64 boundary points around the runner-up's target"
     )

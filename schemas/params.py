@@ -262,6 +262,13 @@ class PlacementParams(_Frozen):
         "be kept: a prior against the trim, since most short convex end walls are the "
         "room's own corners (about one in four a furniture side)",
     )
+    runner_up_prior: float = Field(
+        3.0,
+        ge=0,
+        description="RGB-D frames: the energy the wall graph's runner-up chain of a frame "
+        "must gain over its chosen one to replace it (the site is placed once more with "
+        "each frame's runner-up, where it has one); inf turns the trial off, nats",
+    )
     end_step_depth: float = Field(
         0.8,
         ge=0,

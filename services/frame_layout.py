@@ -12,6 +12,7 @@ As for a point cloud (:mod:`services.local_layout`) with three changes:
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -37,9 +38,9 @@ from services.manhattan import (
 )
 from services.rgbd import OPTICAL_TO_LEVEL, RgbdFrame, backproject
 from services.seen_past_corners import without_corners_seen_past
-from services.types import FloatArray, LocalLayout, ManhattanFrame, ProgressFn
+from services.types import ChainVariant, FloatArray, LocalLayout, ManhattanFrame, ProgressFn
 from services.view_ranges import range_towards, view_ranges
-from services.wall_graph import find_wall_chain
+from services.wall_graph import FRONT_DEPTH, find_wall_chain, side_by_side_depth
 from services.wall_lines import (
     MAX_DOORWAY,
     MAX_FURNITURE_DEPTH,
@@ -824,21 +825,33 @@ def estimate_frame_layout(
             view_ranges=ranges,
         )
     note = trace or (lambda stage, keypoints: None)
-    note("graph", chain.keypoints)
-    kp = _without_furniture(chain.keypoints, lines)
-    note("furniture", kp)
-    kp = _to_frustum_edges(kp, lines, views, ranges)
-    note("frustum edges", kp)
-    kp = without_corners_seen_past(kp, lines)
-    note("corners seen past", kp)
-    # An end wall's length is known once it reaches the view's edge.
-    kp = _drop_end_sides(kp, views, aligned, frame.floor_z)
-    note("end sides", kp)
-    if len(kp) == 2 and len(views) == 1:
-        around = _wall_around_opening(kp, aligned, normals, frame.floor_z, views[0])
-        kp = kp if around is None else around
-    note("opening", kp)
+    finish = functools.partial(
+        _finished_chain,
+        lines=lines,
+        views=views,
+        ranges=ranges,
+        aligned=aligned,
+        normals=normals,
+        floor_z=frame.floor_z,
+    )
+    kp = finish(chain.keypoints, note)
     band, depth = params.layout.end_region_beyond, params.layout.end_region_depth
+    runner_up = None
+    if chain.runner_up is not None and len(chain.runner_up) >= 2:
+        other = finish(chain.runner_up, lambda stage, keypoints: None)
+        # Only a chain that differs from the chain by a front at most (or by its ends)
+        # is offered: one cutting across a notch or an alcove the chain follows closed
+        # rooms better on held-out frames and was wrong there.
+        if (
+            len(other) >= 2
+            and not np.array_equal(other, kp)
+            and side_by_side_depth(kp, other) <= FRONT_DEPTH
+        ):
+            runner_up = ChainVariant(
+                other,
+                boundary_points(aligned, other[0], _unit(other[1] - other[0]), band, depth),
+                boundary_points(aligned, other[-1], _unit(other[-2] - other[-1]), band, depth),
+            )
     report("done", 1.0)
     return LocalLayout(
         keypoints=kp,
@@ -851,7 +864,37 @@ def estimate_frame_layout(
         view_top=top,
         cameras=centres,
         view_ranges=ranges,
+        runner_up=runner_up,
     )
+
+
+def _finished_chain(
+    keypoints: FloatArray,
+    note: ChainTrace,
+    lines: Sequence[WallLine],
+    views: Sequence[CameraView],
+    ranges: FloatArray,
+    aligned: FloatArray,
+    normals: FloatArray,
+    floor_z: float,
+) -> FloatArray:
+    """The wall graph's chain through the frame's later steps (:data:`CHAIN_STAGES`),
+    ``note`` called after each."""
+    note("graph", keypoints)
+    kp = _without_furniture(keypoints, lines)
+    note("furniture", kp)
+    kp = _to_frustum_edges(kp, lines, views, ranges)
+    note("frustum edges", kp)
+    kp = without_corners_seen_past(kp, lines)
+    note("corners seen past", kp)
+    # An end wall's length is known once it reaches the view's edge.
+    kp = _drop_end_sides(kp, views, aligned, floor_z)
+    note("end sides", kp)
+    if len(kp) == 2 and len(views) == 1:
+        around = _wall_around_opening(kp, aligned, normals, floor_z, views[0])
+        kp = kp if around is None else around
+    note("opening", kp)
+    return kp
 
 
 def estimate_rgbd_layout(

@@ -774,7 +774,9 @@ def _without_furniture_sides(
     params: PipelineParams,
     report: ProgressFn,
 ) -> tuple[dict[str, LocalLayout], _PlacedSite]:
-    """The layouts and the site placed (:func:`_placed_site`), with each frame chain's
+    """The layouts and the site placed (:func:`_placed_site`), with each frame's chain
+    replaced by its runner-up (:attr:`LocalLayout.runner_up`) where the site then closes
+    with an energy lower by ``runner_up_prior``, and each frame chain's
     short convex end wall dropped, or its end step round furniture in a corner flattened,
     where the site then closes with an energy lower by ``end_wall_prior``
     (:mod:`services.end_walls`), one end at a time, fragments in id order; a loop that
@@ -787,6 +789,12 @@ def _without_furniture_sides(
         functools.partial(flattened_end_step, deepest=params.placement.end_step_depth),
     )
     for k, fid in enumerate(sorted(usable)):
+        runner_up = kept[fid].with_runner_up()
+        if runner_up is not None and params.placement.runner_up_prior < math.inf:
+            trial = {**kept, fid: runner_up}
+            tried = _placed_site(trial, usable, hints, params)
+            if _closes_better(tried[2], placed[2], params.placement.runner_up_prior):
+                kept, placed = trial, tried
         for end, trim in itertools.product(END_WALLS, trims):
             variant = trim(kept[fid], end, least_view=least_view)
             if variant is None:

@@ -96,6 +96,22 @@ class ManhattanFrame:
 
 
 @dataclass(frozen=True)
+class ChainVariant:
+    """Another chain a fragment's walls allow, aligned frame, as :class:`LocalLayout` holds
+    its own: keypoints (K, 2) and the boundary points (M, 3) around its source and target."""
+
+    keypoints: FloatArray
+    source_boundary: FloatArray
+    target_boundary: FloatArray
+
+    def snapped(self) -> ChainVariant:
+        """The variant on the fixed grid (see ``LocalLayout.snapped``)."""
+        return ChainVariant(
+            _snap(self.keypoints), _snap(self.source_boundary), _snap(self.target_boundary)
+        )
+
+
+@dataclass(frozen=True)
 class LocalLayout:
     """The chain of walls one fragment sees (paper 3.1).
 
@@ -128,6 +144,9 @@ class LocalLayout:
     camera (aligned frame, radians), how far the walls seen there stand, m
     (:func:`services.view_ranges.view_ranges`; empty for clouds and merged frames). Two
     frames whose ranges agree once turned share their camera.
+    runner_up: frames only: the chain the wall graph ranked second where its two candidate
+    chains differ (:attr:`services.wall_graph.WallChain.runner_up`), after the same steps as
+    the chain; None otherwise. The placement tries it (:meth:`with_runner_up`).
     """
 
     keypoints: FloatArray
@@ -141,6 +160,7 @@ class LocalLayout:
     view_top: float | None = None
     cameras: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     view_ranges: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    runner_up: ChainVariant | None = None
 
     @property
     def ok(self) -> bool:
@@ -166,6 +186,20 @@ class LocalLayout:
             view_top=_snap_scalar(self.view_top, _UNIT_DECIMALS),
             cameras=_snap(self.cameras),
             view_ranges=_snap(self.view_ranges),
+            runner_up=None if self.runner_up is None else self.runner_up.snapped(),
+        )
+
+    def with_runner_up(self) -> LocalLayout | None:
+        """The layout with its runner-up chain in place of its chain (and no runner-up);
+        None without one."""
+        if self.runner_up is None:
+            return None
+        return replace(
+            self,
+            keypoints=self.runner_up.keypoints,
+            source_boundary=self.runner_up.source_boundary,
+            target_boundary=self.runner_up.target_boundary,
+            runner_up=None,
         )
 
     def keypoints_local(self) -> FloatArray:

@@ -23,7 +23,7 @@ from services.geometry import cross
 from services.types import FloatArray
 from services.wall_lines import MAX_DOORWAY, MAX_OPEN_ABOVE, WallLine, run_axis
 
-__all__ = ["WallChain", "find_wall_chain"]
+__all__ = ["FRONT_DEPTH", "WallChain", "find_wall_chain", "side_by_side_depth"]
 
 _CORNER_REACH = 3.0  # m, how far past a segment's end a deduced corner may lie
 _OCCLUSION_REACH = 3.0  # m, longest gap the ST-graph links across on one line
@@ -38,8 +38,9 @@ _ON_SEGMENT = 0.01  # m, a node this close to an edge's segment lies on it
 _LOW_WALL_SHARE = 0.5  # how much a cell with wall points but not the wall's full height covers
 _UNKNOWN_COST = 0.5  # what a cell showing neither wall nor space behind it costs a chain
 _MOUTH_STANDING = 0.5  # share of an opening's mouth where the wall stands (whole or lintel)
-_FRONT_DEPTH = 1.05  # m, deepest furniture (a sofa) a frame's cheapest chain may run along
+FRONT_DEPTH = 1.05  # m, deepest furniture (a sofa) a frame's cheapest chain may run along
 _STANDING_OVER = 0.5  # share of a front's stretch the wall behind it shows over
+_SIDE_BY_SIDE = 0.2  # m, two chains' walls overlapping by more than this run side by side
 
 
 @dataclass(frozen=True)
@@ -48,10 +49,13 @@ class WallChain:
 
     keypoints: (K, 2) float64, source to target, interior on the left.
     cost: total edge weight of the chain.
+    runner_up: frames only: (K', 2) the other of the frame's two candidate chains (the
+        frustum's path and the path explaining the most wall) where they differ, else None.
     """
 
     keypoints: FloatArray
     cost: float
+    runner_up: FloatArray | None = None
 
 
 @dataclass
@@ -490,9 +494,13 @@ def find_wall_chain(
     node_points = np.asarray(nodes.points)
     found = _frustum_path(we, node_points, views) if views else None
     corner_price = params.frame.corner_price if views else _CORNER_METERS
+    other: tuple[list[int], float] | None = None
     if found is not None:
         best = _best_path(we, cover, unseen, node_points, corner_price)
-        found = _closer_to_the_walls(found, best, cover, node_points, lines)
+        chosen = _closer_to_the_walls(found, best, cover, node_points, lines)
+        if best is not None and best[0] != found[0]:
+            other = found if chosen is best else best
+        found = chosen
     if found is None and params.source_target == "spanning_forest":
         found = _forest_path(we, st)
     elif found is None:
@@ -503,7 +511,12 @@ def find_wall_chain(
     points = _corners_only(np.array([nodes.points[i] for i in order]))
     if not views:
         points = _across_openings(points, lines)
-    return WallChain(keypoints=_ends_along_high_wall(points, lines), cost=cost)
+    runner_up = None
+    if other is not None:
+        runner_up = _ends_along_high_wall(
+            _corners_only(np.array([nodes.points[i] for i in other[0]])), lines
+        )
+    return WallChain(keypoints=_ends_along_high_wall(points, lines), cost=cost, runner_up=runner_up)
 
 
 def _across_openings(points: FloatArray, lines: Sequence[WallLine]) -> FloatArray:
@@ -674,7 +687,7 @@ def _fronts_of(
     front: list[int], back: list[int], points: FloatArray, lines: Sequence[WallLine]
 ) -> bool:
     """Whether a wall of path ``front`` stands before a wall of path ``back`` (parallel,
-    the same way round, up to ``_FRONT_DEPTH`` nearer the room's inside), and the wall
+    the same way round, up to ``FRONT_DEPTH`` nearer the room's inside), and the wall
     behind shows over most of the front's stretch, whole or seen only high up: the camera
     saw the room's wall over a wardrobe or a sofa, which a wall of the room would hide (a
     wall seen through a door shows nowhere over the door's wall)."""
@@ -684,7 +697,7 @@ def _fronts_of(
         for other in backs:
             depth = (edge.offset - other.offset) * inward
             if (other.axis, other.travel) != (edge.axis, edge.travel) or not (
-                _END_MATCH < depth <= _FRONT_DEPTH
+                _END_MATCH < depth <= FRONT_DEPTH
             ):
                 continue
             if any(
@@ -693,6 +706,30 @@ def _fronts_of(
             ):
                 return True
     return False
+
+
+def side_by_side_depth(chain: FloatArray, other: FloatArray) -> float:
+    """How far apart (m) two chains' (K, 2) walls stand where they run the same way side by
+    side (parallel, the same direction of travel, overlapping by more than
+    ``_SIDE_BY_SIDE``): the largest such offset, 0 where none do.
+
+    A front taken for the wall behind it stands at most a wardrobe's or sofa's depth
+    before it; a chain that instead cuts across a notch or an alcove the other follows
+    stands the notch's depth away.
+
+    >>> notch = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.5], [3.0, 1.5], [3.0, 0.0], [5.0, 0.0]])
+    >>> side_by_side_depth(notch, np.array([[0.0, 0.0], [5.0, 0.0]]))
+    1.5
+    """
+    apart = 0.0
+    for edge in _path_edges(list(range(len(chain))), chain):
+        for twin in _path_edges(list(range(len(other))), other):
+            if (twin.axis, twin.travel) != (edge.axis, edge.travel):
+                continue
+            overlap = min(max(edge.ends), max(twin.ends)) - max(min(edge.ends), min(twin.ends))
+            if overlap > _SIDE_BY_SIDE:
+                apart = max(apart, abs(edge.offset - twin.offset))
+    return apart
 
 
 def _lines_on(lines: Sequence[WallLine], axis: int, travel: int, offset: float) -> list[WallLine]:

@@ -8,11 +8,12 @@ the column count each field documents.
 from __future__ import annotations
 
 import base64
+from typing import Any
 
 import numpy as np
 
 from schemas.layout import LocalLayoutWire
-from services.types import FloatArray, LocalLayout, ManhattanFrame
+from services.types import ChainVariant, FloatArray, LocalLayout, ManhattanFrame
 
 __all__ = ["decode_array", "encode_array", "layout_from_wire", "layout_to_wire"]
 
@@ -44,13 +45,26 @@ def layout_to_wire(layout: LocalLayout) -> LocalLayoutWire:
         view_top=layout.view_top,
         cameras=encode_array(layout.cameras) if len(layout.cameras) else None,
         view_ranges=encode_array(layout.view_ranges) if len(layout.view_ranges) else None,
+        **_runner_up_to_wire(layout.runner_up),
     )
+
+
+def _runner_up_to_wire(variant: ChainVariant | None) -> dict[str, Any]:
+    """The wire fields of a layout's runner-up chain (none without one)."""
+    if variant is None:
+        return {}
+    return {
+        "runner_up": variant.keypoints.tolist(),
+        "runner_up_source_boundary": encode_array(variant.source_boundary),
+        "runner_up_target_boundary": encode_array(variant.target_boundary),
+    }
 
 
 def layout_from_wire(wire: LocalLayoutWire) -> LocalLayout:
     """Inverse of :func:`layout_to_wire`: (K, 2) keypoints, (M, 3) boundaries, (F, 2)
     footprint, (W, 2) unchained walls, (C, 2) cameras and (B, 2) view ranges (none for a
-    layout stored without), all float64 in the aligned frame."""
+    layout stored without), and the runner-up chain where there is one, all float64 in the
+    aligned frame."""
     frame = ManhattanFrame(
         rotation=np.asarray(wire.rotation, dtype=np.float64),
         floor_z=wire.floor_z,
@@ -68,4 +82,11 @@ def layout_from_wire(wire: LocalLayoutWire) -> LocalLayout:
         view_top=wire.view_top,
         cameras=decode_array(wire.cameras or "", 2),
         view_ranges=decode_array(wire.view_ranges or "", 2),
+        runner_up=None
+        if wire.runner_up is None
+        else ChainVariant(
+            np.asarray(wire.runner_up, dtype=np.float64).reshape(-1, 2),
+            decode_array(wire.runner_up_source_boundary, 3),
+            decode_array(wire.runner_up_target_boundary, 3),
+        ),
     )

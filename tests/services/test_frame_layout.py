@@ -13,6 +13,7 @@ from schemas.params import PipelineParams
 from services.evaluation import evaluate_result, keypoint_error
 from services.frame_layout import CHAIN_STAGES, estimate_rgbd_layout, frame_points
 from services.frustum import CameraView, in_any_view, view_angle, visible_band
+from services.geometry import distance_to_polygon
 from services.local_layout import footprint_cells
 from services.pipeline import place_site
 from services.placement.pieces import make_piece
@@ -430,3 +431,30 @@ def test_a_chain_end_is_not_carried_on_behind_what_the_camera_saw_nearer() -> No
     assert world[:, 0].max() < 3.89 + MAX_FURNITURE_DEPTH, np.round(world, 2).tolist()
     assert world[:, 0].min() > -3.05 - MAX_FURNITURE_DEPTH, np.round(world, 2).tolist()
     np.testing.assert_allclose(world[:, 1], 4.45, atol=0.1)
+
+
+@pytest.mark.parametrize(("y", "runner_up"), [(6.0, True), (3.0, False)])
+def test_a_frame_whose_wall_graph_offers_two_chains_keeps_the_other_as_its_runner_up(
+    y: float, runner_up: bool
+) -> None:
+    # A 2 m deep recess 3 m wide in the wall y = 0, a Kinect looking straight into it.
+    # From 6 m the view holds the wall on both sides of the recess's mouth and the graph's
+    # two chains part ways (the frustum's widest pair and the most wall); the one not
+    # taken is kept, through the same later steps, as the runner-up, and it lies on the
+    # room's walls too. From 3 m both are the recess.
+    outline = np.array([[0, 0], [3.5, 0], [3.5, -2], [6.5, -2], [6.5, 0], [10, 0], [10, 8], [0, 8]])
+    room = Room.from_polygon(outline.astype(float), 2.7)
+    frame, pose = render_views(room, Furnishing(), {"f": ((5.0, y, 1.5), -90.0, -5.0)})["f"]
+    layout = estimate_rgbd_layout(frame)
+    assert layout.ok
+    if not runner_up:
+        assert layout.runner_up is None
+        assert layout.with_runner_up() is None
+        return
+    other = layout.with_runner_up()
+    assert other is not None and other.runner_up is None
+    assert layout.runner_up is not None
+    assert not np.array_equal(other.keypoints, layout.keypoints)
+    assert other.source_boundary.shape[1] == other.target_boundary.shape[1] == 3
+    world = other.keypoints_local() @ pose[:3, :3].T + pose[:3, 3]
+    assert distance_to_polygon(world[:, :2], outline.astype(float)).max() < 0.08

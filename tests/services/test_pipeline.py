@@ -33,7 +33,7 @@ from services.pipeline import (
 from services.placement import PlacementCandidate
 from services.refinement import Refinement
 from services.synthetic import ground_truth_json
-from services.types import LocalLayout, ManhattanFrame, ParsedFragment
+from services.types import ChainVariant, LocalLayout, ManhattanFrame, ParsedFragment
 from tests.conftest import (
     UNTUNED,
     chains_from_polygon,
@@ -446,6 +446,51 @@ def test_a_frame_chain_ending_on_a_furniture_side_is_placed_without_it():
     assert tried.confidence == pytest.approx(clean.confidence)
     room = np.array(kept.floorplan.rooms[0].polygon)
     assert abs(signed_area(room) - signed_area(np.array(clean.floorplan.rooms[0].polygon))) > 1.0
+
+
+def _placed_with_runner_up(
+    layouts: dict[str, LocalLayout], chain: np.ndarray, runner_up: np.ndarray
+) -> tuple[ResultModel, ResultModel]:
+    """The site placed with p1's chain ``chain`` and its runner-up ``runner_up`` (the
+    chain-end trials off), and so again with the runner-up trial off."""
+    empty = np.zeros((0, 3))
+    p1 = dataclasses.replace(
+        layouts["p1"], keypoints=chain, runner_up=ChainVariant(runner_up, empty, empty)
+    )
+    exact = PlacementParams(refined_junction_mean=0.0, end_wall_trial=0.0, end_step_depth=0.0)
+    off = exact.model_copy(update={"runner_up_prior": math.inf})
+    changed = {**layouts, "p1": p1}
+    return (
+        place_site(changed, PipelineParams(placement=exact)),
+        place_site(changed, PipelineParams(placement=off)),
+    )
+
+
+def test_a_frames_runner_up_chain_replaces_its_chain_where_the_room_then_closes():
+    # The wall graph took a wardrobe's side for the end of p1's chain; its runner-up chain
+    # ends on the wall. The room closes far better with the runner-up.
+    layouts = _framed(_hand_layouts([1.0, 9.5, 14.0, 20.0]))
+    clean = place_site(
+        layouts, PipelineParams(placement=PlacementParams(refined_junction_mean=0.0))
+    )
+    ends = layouts["p1"].keypoints
+    sided = np.vstack([ends, ends[-1] + np.array([0.0, -0.6])])
+    tried, kept = _placed_with_runner_up(layouts, sided, ends)
+    p1 = {f.id: f for f in tried.fragments}["p1"]
+    assert len(p1.local_layout.keypoints) == len(ends)  # reported as placed: the runner-up
+    assert np.allclose(tried.floorplan.rooms[0].polygon, clean.floorplan.rooms[0].polygon)
+    room = np.array(kept.floorplan.rooms[0].polygon)
+    assert abs(signed_area(room) - signed_area(np.array(clean.floorplan.rooms[0].polygon))) > 1.0
+
+
+def test_a_runner_up_chain_the_room_does_not_close_better_with_is_left():
+    layouts = _framed(_hand_layouts([1.0, 9.5, 14.0, 20.0]))
+    ends = layouts["p1"].keypoints
+    sided = np.vstack([ends, ends[-1] + np.array([0.0, -0.6])])
+    tried, kept = _placed_with_runner_up(layouts, ends, sided)
+    p1 = {f.id: f for f in tried.fragments}["p1"]
+    assert len(p1.local_layout.keypoints) == len(ends)
+    assert tried.floorplan.rooms[0].polygon == kept.floorplan.rooms[0].polygon
 
 
 def test_a_frame_chain_ending_round_a_wardrobe_in_a_corner_is_placed_flattened():

@@ -383,3 +383,32 @@ def test_a_deduced_wall_makes_no_corner_past_the_step_it_bridges(deduced: bool) 
     corner = np.array([1.4, 1.0])
     found = any(np.allclose(p, corner, atol=1e-6) for p in nodes.points)
     assert found is not deduced
+
+
+@pytest.mark.parametrize(("camera", "runner_up"), [("kinect", True), ("wide", False)])
+def test_a_frame_keeps_the_chain_it_did_not_take_as_its_runner_up(
+    camera: str, runner_up: bool
+) -> None:
+    # A camera 6 m in front of the recess's wall, looking at it. A kinect's view holds the
+    # recess alone: the frustum's chain is the recess, the chain explaining the most wall
+    # runs on along the wall both ways and is taken; the recess alone is its runner-up. A
+    # wide camera sees the same chain both ways: no runner-up.
+    from services.frustum import CameraView
+    from services.rgbd import OPTICAL_TO_LEVEL
+    from services.synthetic.render import CAMERAS
+
+    facing_down = np.diag([-1.0, -1.0, 1.0])  # the level frame turned to look along -y
+    view = CameraView.from_intrinsics(
+        CAMERAS[camera], facing_down @ OPTICAL_TO_LEVEL, np.array([5.0, 6.0, 1.2])
+    )
+    chain = find_wall_chain(_recess(False), LayoutParams(), [view])
+    assert chain is not None
+    whole = np.array([[0, 0], [3.5, 0], [3.5, -2], [6.5, -2], [6.5, 0], [10, 0]], dtype=float)
+    assert np.allclose(chain.keypoints, whole, atol=0.05)
+    if runner_up:
+        assert chain.runner_up is not None
+        assert np.allclose(chain.runner_up, whole[1:-1], atol=0.05)
+    else:
+        assert chain.runner_up is None
+    cloud = find_wall_chain(_recess(False), LayoutParams())
+    assert cloud is not None and cloud.runner_up is None  # no views: no runner-up

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from schemas.layout import LocalLayoutWire
-from services.types import Evidence
+from services.types import ChainVariant, Evidence
 from store.layouts import layout_from_wire, layout_to_wire
 from tests.conftest import scene_layouts, small_scene
 
@@ -99,3 +99,27 @@ def test_a_frames_view_ranges_survive_the_wire():
     assert layout_from_wire(LocalLayoutWire.model_validate(old)).view_ranges.shape == (0, 2)
     cloud = scene_layouts()[small_scene("easy", 0).fragments[0].id]
     assert layout_to_wire(cloud).view_ranges is None
+
+
+def test_a_frames_runner_up_chain_survives_the_wire():
+    runner_up = ChainVariant(
+        np.array([[0.0, 0.0], [2.5, 0.0], [2.5, 1.75]]),
+        np.array([[0.1, 0.2, 0.3]]),
+        np.array([[2.4, 1.7, 0.5], [2.45, 1.72, 1.5]]),
+    )
+    layout = dataclasses.replace(
+        scene_layouts()[small_scene("easy", 0).fragments[0].id],
+        evidence="frame",
+        runner_up=runner_up,
+    )
+    wire = layout_to_wire(layout)
+    back = layout_from_wire(LocalLayoutWire.model_validate_json(wire.model_dump_json()))
+    assert back.runner_up is not None
+    assert np.array_equal(back.runner_up.keypoints, runner_up.keypoints)
+    assert np.array_equal(back.runner_up.source_boundary, runner_up.source_boundary)
+    assert np.array_equal(back.runner_up.target_boundary, runner_up.target_boundary)
+    old = wire.model_dump(mode="json")
+    del old["runner_up"]  # stored before the field existed: the chain alone is tried
+    assert layout_from_wire(LocalLayoutWire.model_validate(old)).runner_up is None
+    cloud = scene_layouts()[small_scene("easy", 0).fragments[0].id]
+    assert layout_to_wire(cloud).runner_up is None
