@@ -29,7 +29,7 @@ from services.frustum import (
     visible_band,
 )
 from services.geometry import cross, unique_cells
-from services.local_layout import FOOTPRINT_CELL, boundary_points, footprint_cells
+from services.local_layout import FOOTPRINT_CELL, end_boundaries, footprint_cells
 from services.manhattan import (
     OrientedCloud,
     estimate_manhattan_frame,
@@ -847,17 +847,14 @@ def estimate_frame_layout(
             and not np.array_equal(other, kp)
             and side_by_side_depth(kp, other) <= FRONT_DEPTH
         ):
-            runner_up = ChainVariant(
-                other,
-                boundary_points(aligned, other[0], _unit(other[1] - other[0]), band, depth),
-                boundary_points(aligned, other[-1], _unit(other[-2] - other[-1]), band, depth),
-            )
+            runner_up = ChainVariant(other, *end_boundaries(aligned, other, band, depth))
+    source_boundary, target_boundary = end_boundaries(aligned, kp, band, depth)
     report("done", 1.0)
     return LocalLayout(
         keypoints=kp,
         frame=frame,
-        source_boundary=boundary_points(aligned, kp[0], _unit(kp[1] - kp[0]), band, depth),
-        target_boundary=boundary_points(aligned, kp[-1], _unit(kp[-2] - kp[-1]), band, depth),
+        source_boundary=source_boundary,
+        target_boundary=target_boundary,
         footprint=footprint,
         evidence="frame",
         view_angle=across,

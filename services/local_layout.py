@@ -17,6 +17,7 @@ from services.wall_lines import WallLine, find_wall_lines, scan_top
 __all__ = [
     "FOOTPRINT_CELL",
     "boundary_points",
+    "end_boundaries",
     "estimate_local_layout",
     "footprint_cells",
     "unchained_walls",
@@ -117,6 +118,17 @@ def wall_points_under_ceiling(
     return positions
 
 
+def end_boundaries(
+    aligned: FloatArray, keypoints: FloatArray, band: float, depth: float
+) -> tuple[FloatArray, FloatArray]:
+    """The end regions (:func:`boundary_points`) around a chain's (K >= 2, 2) source and
+    target."""
+    return (
+        boundary_points(aligned, keypoints[0], _unit(keypoints[1] - keypoints[0]), band, depth),
+        boundary_points(aligned, keypoints[-1], _unit(keypoints[-2] - keypoints[-1]), band, depth),
+    )
+
+
 def _unit(v: FloatArray) -> FloatArray:
     norm = float(np.linalg.norm(v))
     return v / norm if norm > 0 else v
@@ -172,11 +184,12 @@ def estimate_local_layout(
         )
     kp = chain.keypoints
     band, depth = params.layout.end_region_beyond, params.layout.end_region_depth
+    source_boundary, target_boundary = end_boundaries(aligned, kp, band, depth)
     layout = LocalLayout(
         keypoints=kp,
         frame=frame,
-        source_boundary=boundary_points(aligned, kp[0], _unit(kp[1] - kp[0]), band, depth),
-        target_boundary=boundary_points(aligned, kp[-1], _unit(kp[-2] - kp[-1]), band, depth),
+        source_boundary=source_boundary,
+        target_boundary=target_boundary,
         footprint=footprint_cells(aligned),
         evidence=evidence,
         unchained_walls=unchained_walls(

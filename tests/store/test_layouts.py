@@ -8,18 +8,23 @@ import numpy as np
 import pytest
 
 from schemas.layout import LocalLayoutWire
-from services.types import ChainVariant, Evidence
+from services.types import ChainVariant, Evidence, LocalLayout
 from store.layouts import layout_from_wire, layout_to_wire
 from tests.conftest import scene_layouts, small_scene
 
 pytestmark = pytest.mark.timeout(300)
 
 
-def test_layout_survives_the_wire_format():
-    layout = scene_layouts()[small_scene("easy", 0).fragments[0].id]
-    back = layout_from_wire(
+def _round_trip(layout: LocalLayout) -> LocalLayout:
+    """The layout written to its wire form as JSON and read back."""
+    return layout_from_wire(
         LocalLayoutWire.model_validate_json(layout_to_wire(layout).model_dump_json())
     )
+
+
+def test_layout_survives_the_wire_format():
+    layout = scene_layouts()[small_scene("easy", 0).fragments[0].id]
+    back = _round_trip(layout)
     assert np.array_equal(back.keypoints, layout.keypoints)
     assert np.array_equal(back.source_boundary, layout.source_boundary)
     assert np.array_equal(back.footprint, layout.footprint)
@@ -62,7 +67,7 @@ def test_a_frames_view_angle_survives_the_wire():
         scene_layouts()[small_scene("easy", 0).fragments[0].id], evidence="frame", view_angle=1.4
     )
     wire = layout_to_wire(layout)
-    back = layout_from_wire(LocalLayoutWire.model_validate_json(wire.model_dump_json()))
+    back = _round_trip(layout)
     assert back.view_angle == 1.4
     old = wire.model_dump(mode="json")
     del old["view_angle"]  # stored before the field existed: unknown, no shift
@@ -75,7 +80,7 @@ def test_a_frames_cameras_survive_the_wire():
         scene_layouts()[small_scene("easy", 0).fragments[0].id], evidence="frame", cameras=cameras
     )
     wire = layout_to_wire(layout)
-    back = layout_from_wire(LocalLayoutWire.model_validate_json(wire.model_dump_json()))
+    back = _round_trip(layout)
     assert np.array_equal(back.cameras, cameras)
     old = wire.model_dump(mode="json")
     del old["cameras"]  # stored before the field existed: no camera known, no station
@@ -92,7 +97,7 @@ def test_a_frames_view_ranges_survive_the_wire():
         view_ranges=ranges,
     )
     wire = layout_to_wire(layout)
-    back = layout_from_wire(LocalLayoutWire.model_validate_json(wire.model_dump_json()))
+    back = _round_trip(layout)
     assert np.array_equal(back.view_ranges, ranges)
     old = wire.model_dump(mode="json")
     del old["view_ranges"]  # stored before the field existed: no station told from the view
@@ -113,7 +118,7 @@ def test_a_frames_runner_up_chain_survives_the_wire():
         runner_up=runner_up,
     )
     wire = layout_to_wire(layout)
-    back = layout_from_wire(LocalLayoutWire.model_validate_json(wire.model_dump_json()))
+    back = _round_trip(layout)
     assert back.runner_up is not None
     assert np.array_equal(back.runner_up.keypoints, runner_up.keypoints)
     assert np.array_equal(back.runner_up.source_boundary, runner_up.source_boundary)
